@@ -1,0 +1,263 @@
+"""Run configuration: one YAML file, validated once at the edge into pydantic models.
+
+Every section forbids unknown keys, so a typo fails before any work with the file, the
+dotted key and the reason. The resolved config is saved beside each stage's outputs
+(`save_resolved`), so a run can always be traced back to what produced it.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Literal
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+
+from pipeline.errors import ConfigError
+
+SUITES = ("libero_spatial", "libero_object", "libero_goal", "libero_10", "libero_90")
+
+
+class _Strict(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class RunConfig(_Strict):
+    name: str = "default"
+    output_dir: Path = Path("runs/default")
+    seed: int = 0
+
+
+class TaskSelection(_Strict):
+    suites: list[str] = Field(default_factory=lambda: list(SUITES))
+    # task names (from the BDDL file stem) to keep within the suites; None = all
+    tasks: list[str] | None = None
+    # first N tasks of each suite after filtering; None = all
+    max_tasks_per_suite: int | None = Field(default=None, ge=1)
+    # official init-state indices to run per task
+    init_states: list[int] = Field(default_factory=lambda: list(range(50)))
+
+    @field_validator("suites")
+    @classmethod
+    def _known_suites(cls, v: list[str]) -> list[str]:
+        bad = [s for s in v if s not in SUITES]
+        if bad:
+            raise ValueError(f"unknown suite(s) {bad}; choose from {list(SUITES)}")
+        return v
+
+    @field_validator("init_states")
+    @classmethod
+    def _init_range(cls, v: list[int]) -> list[int]:
+        bad = [i for i in v if not 0 <= i < 50]
+        if bad:
+            raise ValueError(f"init-state indices must be in [0, 50), got {bad}")
+        return v
+
+
+class RolloutConfig(_Strict):
+    horizon: int = Field(default=520, ge=1)
+    control_hz: Literal[20] = 20
+    chunk_size: int = Field(default=8, ge=4, le=32)
+    # zero-action steps after reset so objects settle (as LIBERO's and openpi's loops do)
+    settle_steps: int = Field(default=10, ge=0)
+    # stop an episode once the goal holds (a success needs no more steps)
+    stop_on_success: bool = True
+    # policy camera resolution (images are resized to what the policy wants)
+    policy_image_size: int = Field(default=224, ge=32)
+
+
+class ScriptedNoise(_Strict):
+    """Imperfection knobs of the scripted expert; all zero = the clean expert."""
+
+    grasp_offset_m: float = Field(default=0.0, ge=0.0)  # std of xy grasp-point error
+    approach_height_m: float = Field(default=0.0, ge=0.0)  # std of approach/descend height error
+    gripper_timing_steps: int = Field(default=0, ge=0)  # max early/late close/open, steps
+    action_noise: float = Field(default=0.0, ge=0.0)  # std of Gaussian noise on actions
+    speed_scale: float = Field(default=0.0, ge=0.0, le=0.9)  # +- relative speed variation
+    place_offset_m: float = Field(default=0.0, ge=0.0)  # std of xy placement error
+
+
+class ScriptedPolicyConfig(_Strict):
+    noise: ScriptedNoise = ScriptedNoise()
+
+
+class OpenpiPolicyConfig(_Strict):
+    host: str = "127.0.0.1"
+    port: int = Field(default=8000, ge=1, le=65535)
+    api_key: str | None = None
+    # how images are sent: LIBERO examples flip 180 degrees to match training data
+    image_size: int = Field(default=224, ge=32)
+    rotate_180: bool = True
+
+
+class PolicyConfig(_Strict):
+    kind: Literal["scripted", "openpi"] = "scripted"
+    name: str | None = None  # recorded with each episode; defaults to kind
+    scripted: ScriptedPolicyConfig = ScriptedPolicyConfig()
+    openpi: OpenpiPolicyConfig = OpenpiPolicyConfig()
+
+
+class VideoConfig(_Strict):
+    cameras: list[Literal["agentview", "robot0_eye_in_hand"]] = Field(default_factory=lambda: ["agentview"])
+    fps: int = Field(default=10)
+    resolution: int = Field(default=256, ge=32, le=1024)
+    # render which episodes: failures only (all later stages need) or all of them
+    render: Literal["failures", "all", "none"] = "failures"
+
+    @field_validator("fps")
+    @classmethod
+    def _divides_control(cls, v: int) -> int:
+        if v <= 0 or 20 % v:
+            raise ValueError(f"fps must divide the 20 Hz control rate (1, 2, 4, 5, 10, 20), got {v}")
+        return v
+
+
+class ExecutorConfig(_Strict):
+    kind: Literal["local", "ray"] = "local"
+    workers: int = Field(default=2, ge=1)
+    ray_address: str | None = None
+
+
+class Stage1Config(_Strict):
+    policy: PolicyConfig = PolicyConfig()
+    rollout: RolloutConfig = RolloutConfig()
+    video: VideoConfig = VideoConfig()
+
+
+class SamplingConfig(_Strict):
+    fps: float = Field(default=2.0, gt=0)
+    max_frames: int = Field(default=768, ge=4)
+    max_pixels: int = Field(default=224 * 224, ge=28 * 28)
+    draw_timestamp: bool = False
+
+
+class OpenAIBackendConfig(_Strict):
+    base_url: str = "http://127.0.0.1:8000/v1"
+    model: str = "Qwen/Qwen3.5-27B"
+    api_key: str | None = None
+    max_in_flight: int = Field(default=8, ge=1)
+    timeout_s: float = Field(default=300.0, gt=0)
+    max_retries: int = Field(default=4, ge=0)
+    max_tokens: int = Field(default=4096, ge=16)
+    temperature: float = Field(default=0.0, ge=0.0)
+    video_mode: Literal["mp4", "frames"] = "frames"
+
+
+class TransformersBackendConfig(_Strict):
+    model_path: Path | None = None
+    max_new_tokens: int = Field(default=1024, ge=1)
+    device: str = "cpu"
+
+
+class VLMConfig(_Strict):
+    backend: Literal["simstate", "openai", "transformers"] = "simstate"
+    language: Literal["zh", "en"] = "zh"
+    sampling: SamplingConfig = SamplingConfig()
+    openai: OpenAIBackendConfig = OpenAIBackendConfig()
+    transformers: TransformersBackendConfig = TransformersBackendConfig()
+    # also run the simstate localizer beside a VLM and report agreement
+    compare_with_simstate: bool = True
+
+
+class Stage2Config(_Strict):
+    vlm: VLMConfig = VLMConfig()
+    history_frames: int = Field(default=8, ge=0)
+    # during-failure ends when every object's speed stays under this (m/s) ...
+    settle_speed_mps: float = Field(default=0.01, gt=0)
+    # ... for this many consecutive steps
+    settle_steps: int = Field(default=10, ge=1)
+
+
+class Stage3Config(_Strict):
+    vlm: VLMConfig = VLMConfig()
+    db_url: str | None = None  # default: sqlite:///<output_dir>/review.sqlite
+    reviews_per_item: int = Field(default=2, ge=1)
+    time_tolerance_s: float = Field(default=0.5, ge=0)
+    lease_seconds: int = Field(default=900, ge=10)
+    host: str = "127.0.0.1"
+    port: int = Field(default=8765, ge=1, le=65535)
+
+
+class ReleaseConfig(_Strict):
+    output_dir: Path | None = None  # default: <run.output_dir>/release
+    certify_tries: int = Field(default=2, ge=0)
+    settle_check_steps: int = Field(default=5, ge=1)
+    settle_threshold_m: float = Field(default=0.005, gt=0)
+
+
+class EvalConfig(_Strict):
+    policies: list[PolicyConfig] = Field(default_factory=lambda: [PolicyConfig()])
+    trials_per_condition: int = Field(default=5, ge=1)
+    gripper_conditions: list[Literal["open", "closed"]] = Field(default_factory=lambda: ["open", "closed"])
+    max_offset_m: float = Field(default=0.02, ge=0.0)
+    gripper_settle_steps: int = Field(default=20, ge=1)
+    horizon: int = Field(default=520, ge=1)
+    chunk_sizes: list[int] = Field(default_factory=lambda: [8])
+    temporal_context: Literal["none", "initial_frame", "history"] = "none"
+    rd_every_steps: int = Field(default=20, ge=1)
+    epsilon: float = Field(default=1e-3, gt=0)
+
+
+class Config(_Strict):
+    run: RunConfig = RunConfig()
+    tasks: TaskSelection = TaskSelection()
+    executor: ExecutorConfig = ExecutorConfig()
+    stage1: Stage1Config = Stage1Config()
+    stage2: Stage2Config = Stage2Config()
+    stage3: Stage3Config = Stage3Config()
+    release: ReleaseConfig = ReleaseConfig()
+    eval: EvalConfig = EvalConfig()
+
+    @model_validator(mode="after")
+    def _chunks_in_range(self) -> Config:
+        bad = [c for c in self.eval.chunk_sizes if not 4 <= c <= 32]
+        if bad:
+            raise ValueError(f"eval.chunk_sizes must be within [4, 32], got {bad}")
+        return self
+
+    @property
+    def out(self) -> Path:
+        return Path(self.run.output_dir)
+
+
+def _format_errors(path: Path, err: ValidationError) -> str:
+    lines = [f"{path}: invalid configuration"]
+    for e in err.errors():
+        key = ".".join(str(p) for p in e["loc"]) or "<root>"
+        msg = e["msg"]
+        if e["type"] == "extra_forbidden":
+            msg = "unknown key"
+        lines.append(f"  {key}: {msg}")
+    return "\n".join(lines)
+
+
+def load_config(path: str | Path, overrides: dict | None = None) -> Config:
+    """Read and validate a YAML config; raise ConfigError naming the file and key."""
+    path = Path(path)
+    try:
+        raw = yaml.safe_load(path.read_text()) or {}
+    except FileNotFoundError:
+        raise ConfigError(f"{path}: no such config file") from None
+    except yaml.YAMLError as e:
+        raise ConfigError(f"{path}: not valid YAML: {e}") from None
+    if not isinstance(raw, dict):
+        raise ConfigError(f"{path}: top level must be a mapping, got {type(raw).__name__}")
+    for dotted, value in (overrides or {}).items():
+        node = raw
+        *parents, leaf = dotted.split(".")
+        for p in parents:
+            node = node.setdefault(p, {})
+        node[leaf] = value
+    try:
+        return Config.model_validate(raw)
+    except ValidationError as e:
+        raise ConfigError(_format_errors(path, e)) from None
+
+
+def save_resolved(cfg: Config, directory: str | Path, name: str = "config.resolved.yaml") -> Path:
+    """Write the fully resolved config next to a stage's outputs."""
+    from pipeline.atomic import write_text
+
+    target = Path(directory) / name
+    write_text(target, yaml.safe_dump(cfg.model_dump(mode="json"), sort_keys=False))
+    return target

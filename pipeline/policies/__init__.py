@@ -1,0 +1,1 @@
+"""Policies: failure generators for stage 1 and policies under evaluation."""

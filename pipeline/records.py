@@ -1,0 +1,204 @@
+"""Typed records at every stage boundary, and the run folder layout.
+
+Raw data never changes; labels sit beside it, keyed by the stable episode key
+`<suite>/<task_name>/<episode_id>`. Every artifact carries `schema_version`.
+
+Run folder (`run.output_dir`):
+    config.resolved.yaml                 the validated config of the last stage run
+    stage1/episodes.parquet              one EpisodeRecord per finished episode (manifest)
+    stage1/episodes/<suite>/<task>/<episode_id>/
+        steps.parquet                    per-step log (STEP_SCHEMA)
+        states.npy                       (steps+1, state_dim) float64 flattened MuJoCo states;
+                                         row t = state before action t; last row = final state
+        video_<camera>.mp4               rendered from states.npy
+        frames.parquet                   frame index <-> simulator step (FRAME_SCHEMA)
+    stage1/_done/                        completion markers (written last)
+    stage2/ ... stage3/ ... release/ ... eval/   (see each stage's module docstring)
+"""
+
+from __future__ import annotations
+
+from enum import Enum
+
+import pyarrow as pa
+from pydantic import BaseModel, ConfigDict, Field
+
+from pipeline import SCHEMA_VERSION
+
+
+class Level(str, Enum):
+    L1 = "L1"  # action retry
+    L2 = "L2"  # action adaptation
+    L3 = "L3"  # object state recovery
+    L4 = "L4"  # environmental recovery
+
+
+class Category(str, Enum):
+    grasp_failure = "grasp_failure"
+    placement_failure = "placement_failure"
+    object_displacement = "object_displacement"
+    collision_or_interaction_failure = "collision_or_interaction_failure"
+    environmental_obstruction = "environmental_obstruction"
+    other = "other"
+
+
+class Record(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    schema_version: int = SCHEMA_VERSION
+
+
+def episode_id(policy: str, init_state: int, seed: int) -> str:
+    """Stable id of an episode within its task."""
+    return f"{policy}-i{init_state:02d}-s{seed}"
+
+
+def episode_key(suite: str, task: str, ep_id: str) -> str:
+    return f"{suite}/{task}/{ep_id}"
+
+
+class EpisodeRecord(Record):
+    """Stage 1 output: one rollout of a failure-generator policy."""
+
+    suite: str
+    task: str
+    task_index: int
+    instruction: str
+    episode_id: str
+    init_state: int
+    policy: str
+    policy_kind: str
+    policy_params: dict = Field(default_factory=dict)
+    seed: int
+    chunk_size: int
+    horizon: int
+    control_hz: int = 20
+    settle_steps: int
+    steps: int  # control steps executed by the policy (excluding settle steps)
+    success: bool
+    first_success_step: int | None = None
+    wall_time_s: float
+    state_dim: int
+    path: str  # episode folder, relative to the run's stage1/ folder
+    videos: dict[str, str] = Field(default_factory=dict)  # camera -> file name
+    video_fps: int | None = None
+
+    @property
+    def key(self) -> str:
+        return episode_key(self.suite, self.task, self.episode_id)
+
+
+# Per-step log of one episode. Row t describes the step that applied action t to state t.
+STEP_SCHEMA = pa.schema(
+    [
+        pa.field("step", pa.int32(), nullable=False),
+        pa.field("action", pa.list_(pa.float32(), 7), nullable=False),
+        pa.field("eef_pos", pa.list_(pa.float32(), 3), nullable=False),
+        pa.field("eef_quat", pa.list_(pa.float32(), 4), nullable=False),  # w, x, y, z
+        pa.field("gripper_qpos", pa.list_(pa.float32(), 2), nullable=False),
+        pa.field("goal", pa.bool_(), nullable=False),  # goal holds after this step
+        pa.field("query", pa.bool_(), nullable=False),  # a new chunk was requested at this step
+    ],
+    metadata={"schema_version": str(SCHEMA_VERSION)},
+)
+
+# Frame <-> step table of a rendered video: frame i shows the state *before* action `step`
+# (the last frame may show the final state, step == steps). time_s = step / control_hz.
+FRAME_SCHEMA = pa.schema(
+    [
+        pa.field("frame", pa.int32(), nullable=False),
+        pa.field("step", pa.int32(), nullable=False),
+        pa.field("time_s", pa.float64(), nullable=False),
+    ],
+    metadata={"schema_version": str(SCHEMA_VERSION)},
+)
+
+
+def step_at_time(time_s: float, control_hz: int = 20) -> int:
+    """The simulator step a time in seconds (from episode start) refers to."""
+    return int(round(time_s * control_hz))
+
+
+# ---- stage 2: localization -------------------------------------------------------------
+class SimEvent(Record):
+    """Something the simulator-state analysis saw happen (evidence for people and rules)."""
+
+    step: int
+    time_s: float
+    kind: str  # grasp_missed | grasp_lost | object_dropped | object_toppled | unintended_displacement
+    #            | robot_contact_non_target | object_collision | goal_regression | ...
+    object: str | None = None
+    other: str | None = None
+    detail: str = ""
+
+
+class Phases(Record):
+    """Half-open step ranges [start, end) of the three phases of a failed episode."""
+
+    pre: tuple[int, int]
+    during: tuple[int, int]
+    post: tuple[int, int]
+
+
+class Localization(Record):
+    """Stage 2 output for one failed episode that was localized (not quarantined)."""
+
+    key: str
+    suite: str
+    task: str
+    episode_id: str
+    instruction: str
+    source: str  # simstate | openai | transformers
+    model: str | None = None
+    prompt_name: str | None = None
+    prompt_hash: str | None = None
+    raw_text: str | None = None
+    fail_time_s: float
+    fail_step: int
+    phases: Phases
+    scene_bddl: str  # relative to the stage2 folder
+    scene_state: str
+    history: str | None = None
+    events: list[SimEvent] = Field(default_factory=list)
+    simstate_time_s: float | None = None  # the simstate localizer's onset, when run beside a VLM
+
+
+class QuarantineEntry(Record):
+    """An output that could not be used, kept with its raw text and the reason."""
+
+    key: str
+    stage: str  # stage2 | stage3
+    source: str
+    reason: str  # no_json | schema | out_of_range | truncated | backend_error | ...
+    detail: str = ""
+    raw_text: str | None = None
+    model: str | None = None
+    prompt_name: str | None = None
+    prompt_hash: str | None = None
+
+
+# Per-step simulator evidence of an episode, shown to reviewers and used by simstate rules.
+EVIDENCE_SCHEMA = pa.schema(
+    [
+        pa.field("step", pa.int32(), nullable=False),
+        pa.field("time_s", pa.float64(), nullable=False),
+        pa.field("gripper_opening", pa.float32(), nullable=False),
+        pa.field("grasped", pa.string(), nullable=False),  # object held between the fingers, or ""
+        pa.field("contacts", pa.list_(pa.string()), nullable=False),  # "a|b" pairs, sorted names
+        pa.field("displacement", pa.map_(pa.string(), pa.float32()), nullable=False),  # m from start
+        pa.field("goal_progress", pa.float32(), nullable=False),  # share of goal conjuncts true
+    ],
+    metadata={"schema_version": str(SCHEMA_VERSION)},
+)
+
+
+# ---- stage 3: characterization --------------------------------------------------------
+class Characterization(Record):
+    key: str
+    recovery_level: Level
+    failure_category: Category
+    recovery_action: str = Field(min_length=1, max_length=200)
+    source: str  # simstate | openai | transformers
+    model: str | None = None
+    prompt_name: str | None = None
+    prompt_hash: str | None = None
+    raw_text: str | None = None

@@ -1,0 +1,252 @@
+"""One LIBERO task environment: the only place that talks to LIBERO, robosuite and MuJoCo.
+
+Building an environment is slow (about 4-8 s: XML assembly and model compilation); an
+episode start is cheap. So build one `SimEnv` per task and reuse it across that task's
+episodes: `reset_to(state)` runs LIBERO's soft reset followed by `set_init_state`, exactly
+as LIBERO's evaluation does, and also clears what the flattened MuJoCo state does not
+hold (the gripper's command ramp, the solver warm start), so an episode is bit-identical
+whether it runs in a fresh or a reused environment.
+
+Quirks kept here and nowhere else:
+- robosuite images are upside down; `render` uses `mujoco.Renderer`, which is not.
+- the Panda gripper ramps its command (`current_action`) across steps: it is not part of
+  the MuJoCo state, so a restored closed gripper needs some close commands to stay closed.
+- robosuite's own horizon/done handling is disabled (`ignore_done`); runners own horizons.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+from dataclasses import dataclass
+
+import numpy as np
+
+from pipeline.sim.libero_setup import ensure_libero_ready
+from pipeline.sim.registry import TaskSpec
+from pipeline.sim.render import CAMERAS, FrameRenderer
+
+ACTION_DIM = 7  # delta position (3), delta axis-angle (3), gripper (-1 open, +1 close)
+CONTROL_HZ = 20
+
+
+@dataclass(frozen=True)
+class Contact:
+    a: str  # owner of the first geom: an object/fixture name or "robot"
+    b: str
+
+
+def _quiet():
+    # LIBERO and robosuite print banners on import and build; keep the terminal for progress
+    return contextlib.redirect_stdout(io.StringIO())
+
+
+class SimEnv:
+    """A built LIBERO environment for one task. Not thread-safe; one per worker process."""
+
+    def __init__(self, task: TaskSpec, control_hz: int = CONTROL_HZ):
+        ensure_libero_ready()
+        with _quiet():
+            from libero.libero.envs.env_wrapper import ControlEnv
+
+            self._wrapper = ControlEnv(
+                bddl_file_name=str(task.bddl_path),
+                has_renderer=False,
+                has_offscreen_renderer=False,  # we render through mujoco.Renderer on demand
+                use_camera_obs=False,
+                control_freq=control_hz,
+                horizon=10**9,
+                ignore_done=True,
+                hard_reset=False,  # soft resets keep the compiled model: cheap episode starts
+            )
+            self._wrapper.reset()
+        self.task = task
+        self.env = self._wrapper.env  # the robosuite/LIBERO domain object
+        self._renderers: dict[int, FrameRenderer] = {}
+        self._owner = self._body_owners()
+
+    # ---- episode lifecycle -------------------------------------------------------------
+    @property
+    def state_dim(self) -> int:
+        m = self.env.sim.model
+        return 1 + m.nq + m.nv
+
+    def reset_to(self, state: np.ndarray) -> None:
+        """Start an episode from a flattened MuJoCo state (an init state or a saved scene)."""
+        state = np.asarray(state, dtype=np.float64)
+        if state.shape != (self.state_dim,):
+            raise ValueError(
+                f"state has shape {state.shape}, but task {self.task.task_id} needs ({self.state_dim},)"
+            )
+        with _quiet():
+            self._wrapper.reset()
+        robot = self.env.robots[0]
+        robot.gripper.current_action = np.zeros(robot.gripper.dof)
+
+        data = self.env.sim.data._data
+        data.qacc_warmstart[:] = 0
+        self._wrapper.set_init_state(state)
+        robot.controller.reset_goal()
+
+    def reset_to_init(self, index: int) -> None:
+        self.reset_to(self.task.init_states()[index])
+
+    def get_state(self) -> np.ndarray:
+        """Flattened MuJoCo state (time, qpos, qvel), as LIBERO's `get_sim_state`."""
+        return np.array(self.env.sim.get_state().flatten(), dtype=np.float64)
+
+    def set_state(self, state: np.ndarray) -> None:
+        """Restore a flattened state mid-episode (no reset), as LIBERO's `set_init_state`."""
+        self._wrapper.set_init_state(np.asarray(state, dtype=np.float64))
+
+    def step(self, action: np.ndarray) -> bool:
+        """One 20 Hz control step; returns whether the task goal holds afterwards."""
+        action = np.asarray(action, dtype=np.float64)
+        if action.shape != (ACTION_DIM,):
+            raise ValueError(f"action must have shape ({ACTION_DIM},), got {action.shape}")
+        _, _, done, _ = self.env.step(action)
+        return bool(done)
+
+    def settle(self, steps: int, gripper: float = -1.0) -> None:
+        """Zero-delta arm actions for `steps` steps, holding the gripper command."""
+        a = np.zeros(ACTION_DIM)
+        a[-1] = gripper
+        for _ in range(steps):
+            self.env.step(a)
+
+    def reanchor_controller(self) -> None:
+        """Make the arm controller's goal the current end-effector pose."""
+        self.env.robots[0].controller.reset_goal()
+
+    # ---- goal ---------------------------------------------------------------------------
+    @property
+    def goal(self) -> list[tuple[str, ...]]:
+        """The goal's conjuncts, e.g. [('on', 'akita_black_bowl_1', 'plate_1')]."""
+        return [tuple(s) for s in self.env.parsed_problem["goal_state"]]
+
+    def goal_satisfied(self) -> bool:
+        return bool(self.env._check_success())
+
+    def goal_conjuncts(self) -> list[tuple[tuple[str, ...], bool]]:
+        return [(c, bool(self.env._eval_predicate(list(c)))) for c in self.goal]
+
+    # ---- scene contents -----------------------------------------------------------------
+    @property
+    def object_names(self) -> list[str]:
+        """Movable objects (with a free joint)."""
+        return list(self.env.objects_dict.keys())
+
+    @property
+    def fixture_names(self) -> list[str]:
+        return list(self.env.fixtures_dict.keys())
+
+    def object_pose(self, name: str) -> tuple[np.ndarray, np.ndarray]:
+        """World position (3,) and quaternion (w, x, y, z) of an object's or fixture's body."""
+        bid = self.env.obj_body_id[name]
+        d = self.env.sim.data
+        return np.array(d.body_xpos[bid]), np.array(d.body_xquat[bid])
+
+    def object_poses(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        return {n: self.object_pose(n) for n in self.object_names}
+
+    def free_joints(self) -> dict[str, int]:
+        """Object name -> qpos address of its free joint (7 numbers: xyz + wxyz)."""
+        m = self.env.sim.model
+        out = {}
+        for name, obj in self.env.objects_dict.items():
+            jname = obj.joints[-1] if obj.joints else None
+            if jname is None:
+                continue
+            jid = m.joint_name2id(jname)
+            if m.jnt_type[jid] == 0:  # mjJNT_FREE
+                out[name] = int(m.jnt_qposadr[jid])
+        return out
+
+    def site_position(self, name: str) -> np.ndarray:
+        return np.array(self.env.sim.data.site_xpos[self.env.sim.model.site_name2id(name)])
+
+    def joint_position(self, name: str) -> float:
+        m = self.env.sim.model
+        return float(self.env.sim.data.qpos[m.jnt_qposadr[m.joint_name2id(name)]])
+
+    def object_state(self, name: str):
+        """LIBERO's state object (what its predicates use) for an object, fixture or region."""
+        return self.env.object_states_dict[name]
+
+    # ---- robot --------------------------------------------------------------------------
+    def eef_pose(self) -> tuple[np.ndarray, np.ndarray]:
+        """End-effector (grip site) position (3,) and rotation matrix (3, 3)."""
+        robot = self.env.robots[0]
+        d = self.env.sim.data
+        return np.array(d.site_xpos[robot.eef_site_id]), np.array(d.site_xmat[robot.eef_site_id]).reshape(3, 3)
+
+    def gripper_qpos(self) -> np.ndarray:
+        robot = self.env.robots[0]
+        return np.array(self.env.sim.data.qpos[robot._ref_gripper_joint_pos_indexes])
+
+    def gripper_opening(self) -> float:
+        """Distance between the two fingers' joints, metres (about 0.08 open, ~0 closed)."""
+        q = self.gripper_qpos()
+        return float(q[0] - q[1])
+
+    # ---- contacts -----------------------------------------------------------------------
+    def _body_owners(self) -> np.ndarray:
+        """For each body id: the object/fixture name it belongs to, 'robot', or ''."""
+        m = self.env.sim.model
+        roots = {}
+        for name in list(self.env.objects_dict) + list(self.env.fixtures_dict):
+            roots[self.env.obj_body_id[name]] = name
+        owners = np.empty(m.nbody, dtype=object)
+        for b in range(m.nbody):
+            name, cur = "", b
+            while cur > 0:
+                if cur in roots:
+                    name = roots[cur]
+                    break
+                bname = m.body_id2name(cur) or ""
+                if bname.startswith(("robot0_", "gripper0_")):
+                    name = "robot"
+                    break
+                cur = int(m.body_parentid[cur])
+            owners[b] = name
+        return owners
+
+    def contacts(self) -> set[tuple[str, str]]:
+        """Unordered pairs of named things in contact now (robot, objects, fixtures)."""
+        m, d = self.env.sim.model, self.env.sim.data
+        pairs = set()
+        for i in range(d.ncon):
+            c = d.contact[i]
+            a = self._owner[m.geom_bodyid[c.geom1]]
+            b = self._owner[m.geom_bodyid[c.geom2]]
+            if a and b and a != b:
+                pairs.add(tuple(sorted((a, b))))
+        return pairs
+
+    # ---- rendering ----------------------------------------------------------------------
+    def render(self, camera: str = "agentview", size: int = 256) -> np.ndarray:
+        """HxWx3 uint8 frame of `camera`, right side up, for the current state."""
+        if camera not in CAMERAS:
+            raise ValueError(f"unknown camera {camera!r}; choose from {CAMERAS}")
+        r = self._renderers.get(size)
+        if r is None:
+            r = self._renderers[size] = FrameRenderer(self.env.sim.model._model, size)
+        return r.render(self.env.sim.data._data, camera)
+
+    def close(self) -> None:
+        for r in self._renderers.values():
+            r.close()
+        self._renderers.clear()
+        with _quiet():
+            self._wrapper.close()
+
+    def __enter__(self) -> SimEnv:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def build_env(task: TaskSpec) -> SimEnv:
+    """Build an environment for `task` (seconds). Reuse it for all of the task's episodes."""
+    return SimEnv(task)
