@@ -64,7 +64,7 @@ def tasks(suite: list[str] = typer.Option(None, "--suite", "-s", help=f"one of {
     for col in ("suite", "#", "task", "instruction", "init states"):
         table.add_column(col, overflow="fold")
     for t in chosen:
-        table.add_row(t.suite, str(t.index), t.name, t.instruction, "50")
+        table.add_row(t.suite, str(t.index), t.name, t.instruction, str(len(t.init_states())))
     console.print(table)
     counts = {s: sum(t.suite == s for t in chosen) for s in SUITES if any(t.suite == s for t in chosen)}
     console.print(" + ".join(f"{s} {n}" for s, n in counts.items()) + f" = {len(chosen)}")

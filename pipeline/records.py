@@ -87,6 +87,65 @@ class EpisodeRecord(Record):
         return episode_key(self.suite, self.task, self.episode_id)
 
 
+# The stage 1 manifest (stage1/episodes.parquet): one row per EpisodeRecord, same column
+# names; `policy_params` is stored as a JSON string and `videos` as a map camera -> file.
+# Read it with `read_episodes` to get EpisodeRecords back.
+EPISODE_SCHEMA = pa.schema(
+    [
+        pa.field("schema_version", pa.int32(), nullable=False),
+        pa.field("suite", pa.string(), nullable=False),
+        pa.field("task", pa.string(), nullable=False),
+        pa.field("task_index", pa.int32(), nullable=False),
+        pa.field("instruction", pa.string(), nullable=False),
+        pa.field("episode_id", pa.string(), nullable=False),
+        pa.field("init_state", pa.int32(), nullable=False),
+        pa.field("policy", pa.string(), nullable=False),
+        pa.field("policy_kind", pa.string(), nullable=False),
+        pa.field("policy_params", pa.string(), nullable=False),  # JSON
+        pa.field("seed", pa.int64(), nullable=False),
+        pa.field("chunk_size", pa.int32(), nullable=False),
+        pa.field("horizon", pa.int32(), nullable=False),
+        pa.field("control_hz", pa.int32(), nullable=False),
+        pa.field("settle_steps", pa.int32(), nullable=False),
+        pa.field("steps", pa.int32(), nullable=False),
+        pa.field("success", pa.bool_(), nullable=False),
+        pa.field("first_success_step", pa.int32()),
+        pa.field("wall_time_s", pa.float64(), nullable=False),
+        pa.field("state_dim", pa.int32(), nullable=False),
+        pa.field("path", pa.string(), nullable=False),
+        pa.field("videos", pa.map_(pa.string(), pa.string()), nullable=False),
+        pa.field("video_fps", pa.int32()),
+    ],
+    metadata={"schema_version": str(SCHEMA_VERSION)},
+)
+
+
+def episodes_table(records: list[EpisodeRecord]) -> pa.Table:
+    import json
+
+    rows = []
+    for r in records:
+        row = r.model_dump(mode="json")
+        row["policy_params"] = json.dumps(row["policy_params"], sort_keys=True)
+        row["videos"] = list(row["videos"].items())
+        rows.append(row)
+    return pa.Table.from_pylist(rows, schema=EPISODE_SCHEMA)
+
+
+def read_episodes(path) -> list[EpisodeRecord]:
+    """The stage 1 manifest as EpisodeRecords."""
+    import json
+
+    import pyarrow.parquet as pq
+
+    out = []
+    for row in pq.read_table(path).to_pylist():
+        row["policy_params"] = json.loads(row["policy_params"])
+        row["videos"] = dict(row["videos"] or [])
+        out.append(EpisodeRecord.model_validate(row))
+    return out
+
+
 # Per-step log of one episode. Row t describes the step that applied action t to state t.
 STEP_SCHEMA = pa.schema(
     [

@@ -12,7 +12,6 @@ log() { printf '\033[1;34m[setup]\033[0m %s\n' "$*"; }
 
 # --- system packages (EGL/Mesa for offscreen MuJoCo, ffmpeg libs come with PyAV) ---
 need_apt=()
-for lib in libEGL.so.1 libGL.so.1 libOSMesa.so; do :; done
 ldconfig -p | grep -q 'libEGL.so.1' || need_apt+=(libegl1)
 ldconfig -p | grep -q 'libGL.so.1' || need_apt+=(libgl1)
 ls /usr/share/glvnd/egl_vendor.d/*mesa* >/dev/null 2>&1 || need_apt+=(libegl-mesa0 libgl1-mesa-dri)
@@ -35,7 +34,7 @@ $PIP "torch==2.13.0"
 # LIBERO's own pins drag in wandb/robomimic; install it bare and list what it imports.
 $PIP --no-deps "libero==0.1.1"
 $PIP -r "$ROOT/requirements/sim.txt"
-$PIP -e "$ROOT[dev]"
+$PIP -e "$ROOT[dev,vlm]"
 
 # --- LIBERO config + assets (never let `import libero.libero` call input()) ---
 "$VENV/bin/python" -m pipeline.sim.libero_setup

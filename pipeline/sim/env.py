@@ -86,7 +86,7 @@ class SimEnv:
         data = self.env.sim.data._data
         data.qacc_warmstart[:] = 0
         self._wrapper.set_init_state(state)
-        robot.controller.reset_goal()
+        self.reanchor_controller()
 
     def reset_to_init(self, index: int) -> None:
         self.reset_to(self.task.init_states()[index])
@@ -115,8 +115,21 @@ class SimEnv:
             self.env.step(a)
 
     def reanchor_controller(self) -> None:
-        """Make the arm controller's goal the current end-effector pose."""
-        self.env.robots[0].controller.reset_goal()
+        """Make the arm controller's goal the current end-effector pose.
+
+        The controller caches the pose it last read (`update` is lazy), and after a state
+        restore that cache still holds the pre-restore pose: anchoring to it makes the arm
+        swing back toward it (measured 13 mm on libero_spatial). Force a fresh read first.
+        """
+        controller = self.env.robots[0].controller
+        controller.update(force=True)
+        controller.reset_goal()
+
+    def hold_gripper(self, closed: bool) -> None:
+        """Set the gripper's command ramp to fully closed/open without stepping, so a restored
+        scene keeps its grasp: the ramp is not in the MuJoCo state (see module docstring)."""
+        gripper = self.env.robots[0].gripper
+        gripper.current_action = np.array([-1.0, 1.0]) * (1.0 if closed else -1.0)
 
     # ---- goal ---------------------------------------------------------------------------
     @property
@@ -173,6 +186,81 @@ class SimEnv:
         """LIBERO's state object (what its predicates use) for an object, fixture or region."""
         return self.env.object_states_dict[name]
 
+    # ---- geometry (for the scripted expert's planner) -----------------------------------
+    def _geom_boxes(self, geom_ids: list[int]) -> np.ndarray:
+        """(k, 2, 3) world-axis-aligned [lo, hi] boxes of the given geoms."""
+        m = self.env.sim.model._model
+        d = self.env.sim.data._data
+        out = np.empty((len(geom_ids), 2, 3))
+        for i, g in enumerate(geom_ids):
+            rot = d.geom_xmat[g].reshape(3, 3)
+            centre = d.geom_xpos[g] + rot @ m.geom_aabb[g, :3]
+            half = np.abs(rot) @ m.geom_aabb[g, 3:]
+            out[i] = centre - half, centre + half
+        return out
+
+    def _collision_geoms(self, bodies: set[int]) -> list[int]:
+        m = self.env.sim.model._model
+        return [
+            g
+            for g in range(m.ngeom)
+            if int(m.geom_bodyid[g]) in bodies and (m.geom_contype[g] or m.geom_conaffinity[g])
+        ]
+
+    def object_boxes(self, name: str) -> np.ndarray:
+        """World boxes (k, 2, 3) of the collision geoms of an object or fixture (all its bodies)."""
+        bodies = {b for b in range(len(self._owner)) if self._owner[b] == name}
+        if not bodies:
+            raise KeyError(f"no object or fixture {name!r} in task {self.task.task_id}")
+        return self._geom_boxes(self._collision_geoms(bodies))
+
+    def object_aabb(self, name: str) -> tuple[np.ndarray, np.ndarray]:
+        """World axis-aligned bounding box (lo, hi) of an object's collision geoms."""
+        boxes = self.object_boxes(name)
+        return boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0)
+
+    def joint_part_boxes(self, joint: str) -> np.ndarray:
+        """World boxes of the collision geoms moved by a joint (its body and descendants)."""
+        m = self.env.sim.model._model
+        root = int(m.jnt_bodyid[m.joint(joint).id])
+        bodies = {root}
+        for b in range(root + 1, m.nbody):
+            if int(m.body_parentid[b]) in bodies:
+                bodies.add(b)
+        return self._geom_boxes(self._collision_geoms(bodies))
+
+    def joint_frame(self, joint: str) -> tuple[np.ndarray, np.ndarray, float, np.ndarray]:
+        """A joint's world anchor (3,), world axis (3,), position, and range (2,)."""
+        m = self.env.sim.model._model
+        d = self.env.sim.data._data
+        j = m.joint(joint).id
+        return (
+            np.array(d.xanchor[j]),
+            np.array(d.xaxis[j]),
+            float(d.qpos[m.jnt_qposadr[j]]),
+            np.array(m.jnt_range[j]),
+        )
+
+    def region(self, name: str) -> dict:
+        """A region site: world position, rotation, half size, parent name and its joints."""
+        site = self.env.object_sites_dict[name]
+        sid = self.env.sim.model.site_name2id(name)
+        d = self.env.sim.data
+        return {
+            "pos": np.array(d.site_xpos[sid]),
+            "mat": np.array(d.site_xmat[sid]).reshape(3, 3),
+            "size": np.array(site.size, dtype=float),
+            "parent": site.parent_name,
+            "joints": list(site.joints or []),
+        }
+
+    def is_region(self, name: str) -> bool:
+        return name in self.env.object_sites_dict
+
+    def fixture_joints(self, name: str) -> list[str]:
+        """Names of the (non-free) joints of an object or fixture, e.g. a stove's knob."""
+        return list(self.env.get_object(name).joints or [])
+
     # ---- robot --------------------------------------------------------------------------
     def eef_pose(self) -> tuple[np.ndarray, np.ndarray]:
         """End-effector (grip site) position (3,) and rotation matrix (3, 3)."""
@@ -207,9 +295,45 @@ class SimEnv:
                 if bname.startswith(("robot0_", "gripper0_")):
                     name = "robot"
                     break
+                if int(m.body_parentid[cur]) == 0 and ("table" in bname or "floor" in bname):
+                    # the arena's support surfaces are not BDDL objects; name them so contacts
+                    # with them (an object resting, a fall) are visible
+                    name = "table" if "table" in bname else "floor"
+                    break
                 cur = int(m.body_parentid[cur])
             owners[b] = name
         return owners
+
+    def finger_contacts(self) -> tuple[set[str], set[str]]:
+        """Owners (objects, fixtures, 'table') touched by the left and by the right finger."""
+        m, d = self.env.sim.model, self.env.sim.data
+        if not hasattr(self, "_finger_geoms"):
+            g = self.env.robots[0].gripper.important_geoms
+            self._finger_geoms = tuple({m.geom_name2id(n) for n in g[k]} for k in ("left_finger", "right_finger"))
+        left, right = set(), set()
+        for i in range(d.ncon):
+            c = d.contact[i]
+            for mine, other in ((c.geom1, c.geom2), (c.geom2, c.geom1)):
+                owner = self._owner[m.geom_bodyid[other]]
+                if owner and owner != "robot":
+                    if mine in self._finger_geoms[0]:
+                        left.add(owner)
+                    elif mine in self._finger_geoms[1]:
+                        right.add(owner)
+        return left, right
+
+    def object_speeds(self) -> dict[str, float]:
+        """Linear speed (m/s) of each movable object, from its free joint's qvel."""
+        m, d = self.env.sim.model, self.env.sim.data
+        out = {}
+        for name, obj in self.env.objects_dict.items():
+            if not obj.joints:
+                continue
+            jid = m.joint_name2id(obj.joints[-1])
+            if m.jnt_type[jid] == 0:  # mjJNT_FREE: first three dofs are the linear velocity
+                a = int(m.jnt_dofadr[jid])
+                out[name] = float(np.linalg.norm(d.qvel[a : a + 3]))
+        return out
 
     def contacts(self) -> set[tuple[str, str]]:
         """Unordered pairs of named things in contact now (robot, objects, fixtures)."""
@@ -233,6 +357,19 @@ class SimEnv:
             r = self._renderers[size] = FrameRenderer(self.env.sim.model._model, size)
         return r.render(self.env.sim.data._data, camera)
 
+    def project(self, camera: str, size: int, points: np.ndarray) -> np.ndarray:
+        """Pixel (column, row) of world points in a `size`x`size` image of `camera`, row 0 at
+        the top, as `render` draws them (pinhole model from MuJoCo's camera pose and fovy)."""
+        m, d = self.env.sim.model, self.env.sim.data
+        cid = m.camera_name2id(camera)
+        pos = np.array(d.cam_xpos[cid])
+        rot = np.array(d.cam_xmat[cid]).reshape(3, 3)  # columns: camera x, y, z in world
+        f = 0.5 * size / np.tan(np.deg2rad(m.cam_fovy[cid]) / 2)
+        local = (np.atleast_2d(points) - pos) @ rot  # MuJoCo cameras look along -z, y up
+        col = size / 2 + f * local[:, 0] / -local[:, 2]
+        row = size / 2 - f * local[:, 1] / -local[:, 2]
+        return np.stack([col, row], axis=1)
+
     def close(self) -> None:
         for r in self._renderers.values():
             r.close()
@@ -245,6 +382,21 @@ class SimEnv:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+def parse_bddl(path) -> dict:
+    """Parse a BDDL problem file with LIBERO's own parser; raise ValueError naming the file."""
+    ensure_libero_ready()
+    with _quiet():
+        from libero.libero.envs.bddl_utils import robosuite_parse_problem
+
+        try:
+            parsed = robosuite_parse_problem(str(path))
+        except Exception as e:  # LIBERO raises bare Exceptions and IndexErrors on bad syntax
+            raise ValueError(f"{path}: LIBERO's BDDL parser failed: {type(e).__name__}: {e}") from None
+    if not isinstance(parsed, dict):
+        raise ValueError(f"{path}: not a BDDL problem (no top-level `(define ...)`)")
+    return parsed
 
 
 def build_env(task: TaskSpec) -> SimEnv:

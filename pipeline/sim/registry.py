@@ -49,12 +49,15 @@ def all_tasks() -> tuple[TaskSpec, ...]:
     from libero.libero import get_libero_path
     from libero.libero.benchmark import get_benchmark_dict
 
+    from pipeline.sim.env import _quiet
+
     bench = get_benchmark_dict()
     bddl_root = Path(get_libero_path("bddl_files"))
     init_root = Path(get_libero_path("init_states"))
     out = []
     for suite in SUITES:
-        b = bench[suite](task_order_index=0)
+        with _quiet():  # LIBERO prints its task order per suite
+            b = bench[suite](task_order_index=0)
         for i in range(b.get_num_tasks()):
             t = b.get_task(i)
             out.append(

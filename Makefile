@@ -1,0 +1,65 @@
+# libero-recover. Two commands do everything on a fresh machine:
+#   make demo   set up, then stage 1 -> 2 -> 3 on the small embedded config
+#   make test   set up (with the test browser), then the whole test suite
+SHELL := /bin/bash
+VENV ?= .venv
+PY := $(VENV)/bin/python
+RECOVER := $(VENV)/bin/recover
+CONFIG ?= configs/smoke.yaml
+# real-simulator tests run in parallel, one worker per core
+PYTEST_WORKERS ?= 2
+
+.PHONY: setup setup-test demo test stage1 stage2 stage3 review-status review-serve release verify reproduce eval tasks bench clean
+
+# setup is idempotent: the stamp re-runs it only when its inputs change
+$(VENV)/.setup-stamp: pyproject.toml requirements/sim.txt scripts/setup.sh
+	bash scripts/setup.sh
+	touch $@
+
+setup: $(VENV)/.setup-stamp
+
+$(VENV)/.setup-test-stamp: $(VENV)/.setup-stamp
+	WITH_BROWSER=1 bash scripts/setup.sh
+	touch $@
+
+setup-test: $(VENV)/.setup-test-stamp
+
+demo: setup
+	$(MAKE) stage1 stage2 stage3 CONFIG=$(CONFIG)
+	$(RECOVER) review status --config $(CONFIG)
+
+test: setup-test
+	$(VENV)/bin/pytest -n $(PYTEST_WORKERS) --dist loadgroup -q
+
+stage1: setup
+	$(RECOVER) stage1 --config $(CONFIG)
+
+stage2: setup
+	$(RECOVER) stage2 --config $(CONFIG)
+
+stage3: setup
+	$(RECOVER) stage3 --config $(CONFIG)
+
+review-status: setup
+	$(RECOVER) review status --config $(CONFIG)
+
+review-serve: setup
+	$(RECOVER) review serve --config $(CONFIG)
+
+release: setup
+	$(RECOVER) release --config $(CONFIG)
+
+verify: setup
+	$(RECOVER) verify $(or $(DIR),runs/smoke/release)
+
+reproduce: setup
+	$(RECOVER) reproduce --config $(CONFIG)
+
+eval: setup
+	$(RECOVER) eval --config $(CONFIG)
+
+tasks: setup
+	$(RECOVER) tasks
+
+clean:
+	rm -rf runs/smoke

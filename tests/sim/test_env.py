@@ -1,0 +1,128 @@
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pipeline.sim import EnvCache, SimEnv, tasks
+
+
+@pytest.fixture(scope="module")
+def env():
+    with SimEnv(tasks(["libero_spatial"])[0]) as e:
+        yield e
+
+
+def _random_actions(n: int, seed: int = 0) -> np.ndarray:
+    return np.random.default_rng(seed).uniform(-1, 1, (n, 7))
+
+
+@pytest.mark.sim
+def test_set_state_then_get_state_gives_back_the_same_vector_exactly(env):
+    env.reset_to_init(0)
+    for a in _random_actions(15):
+        env.step(a)
+    saved = env.get_state()
+    for a in _random_actions(10, seed=1):
+        env.step(a)
+    assert not np.array_equal(env.get_state(), saved)
+    env.set_state(saved)
+    np.testing.assert_array_equal(env.get_state(), saved)
+
+
+@pytest.mark.sim
+def test_an_episode_in_a_reused_environment_is_bit_identical_to_a_fresh_one(env):
+    actions = _random_actions(40, seed=3)
+
+    def play(e: SimEnv) -> np.ndarray:
+        e.reset_to_init(1)
+        for a in actions:
+            e.step(a)
+        return e.get_state()
+
+    first = play(env)
+    # dirty the environment (gripper ramp, warm start) with another episode
+    env.reset_to_init(2)
+    for a in _random_actions(30, seed=4):
+        env.step(a)
+    again = play(env)
+    with SimEnv(env.task) as fresh:
+        from_fresh = play(fresh)
+    np.testing.assert_array_equal(first, again)
+    np.testing.assert_array_equal(first, from_fresh)
+
+
+@pytest.mark.sim
+def test_reset_rejects_a_state_of_the_wrong_length(env):
+    with pytest.raises(ValueError, match=r"needs \(92,\)"):
+        env.reset_to(np.zeros(env.state_dim - 1))
+
+
+@pytest.mark.sim
+def test_rendered_frame_is_not_blank(env):
+    env.reset_to_init(0)
+    for cam in ("agentview", "robot0_eye_in_hand"):
+        img = env.render(cam, 128)
+        assert img.shape == (128, 128, 3) and img.dtype == np.uint8
+        assert img.std() > 10, f"{cam} frame looks blank"
+        assert len(np.unique(img.reshape(-1, 3), axis=0)) > 100
+
+
+@pytest.mark.sim
+def test_rendered_frame_is_right_side_up(env):
+    """Lift one object out of view: the pixels that change must sit where the camera
+    geometry (row 0 at the top) puts that object, not at the mirrored row."""
+    size = 128
+    env.reset_to_init(0)
+    name = "plate_1"
+    before = env.render("agentview", size).astype(int)
+    expected_col, expected_row = env.project("agentview", size, env.object_pose(name)[0])[0]
+    state = env.get_state()
+    moved = state.copy()
+    adr = env.free_joints()[name]
+    moved[1 + adr + 2] += 5.0  # qpos z of the plate's free joint, 5 m up, out of view
+    env.set_state(moved)
+    after = env.render("agentview", size).astype(int)
+    env.set_state(state)
+    rows, cols = np.nonzero(np.abs(after - before).sum(axis=2) > 30)
+    assert len(rows) > 20, "moving the plate changed nothing visible"
+    assert abs(rows.mean() - expected_row) < size * 0.1
+    assert abs(cols.mean() - expected_col) < size * 0.1
+    # the mirrored image would put the change on the other half of the frame
+    assert abs(rows.mean() - (size - 1 - expected_row)) > size * 0.15
+
+
+@pytest.mark.sim
+def test_scene_queries_report_objects_gripper_and_contacts(env):
+    env.reset_to_init(0)
+    assert "akita_black_bowl_1" in env.object_names
+    pos, quat = env.object_pose("akita_black_bowl_1")
+    assert pos.shape == (3,) and abs(np.linalg.norm(quat) - 1) < 1e-6
+    assert 0.0 < env.gripper_opening() < 0.09
+    eef, rot = env.eef_pose()
+    assert eef[2] > pos[2], "the gripper starts above the table objects"
+    np.testing.assert_allclose(rot @ rot.T, np.eye(3), atol=1e-6)
+    # official init states hold objects a little in the air: let them drop first
+    env.settle(10)
+    assert ("akita_black_bowl_1", "robot") not in env.contacts()
+    # close the gripper and drive down onto the bowl: the robot must touch it
+    for _ in range(150):
+        bowl = env.object_pose("akita_black_bowl_1")[0]
+        a = np.zeros(7)
+        a[:3] = np.clip((bowl - env.eef_pose()[0]) * 10, -1, 1)
+        a[6] = 1.0
+        env.step(a)
+        if ("akita_black_bowl_1", "robot") in env.contacts():
+            break
+    assert ("akita_black_bowl_1", "robot") in env.contacts()
+    assert env.gripper_opening() < 0.02
+
+
+@pytest.mark.sim
+def test_env_cache_builds_once_per_task_and_evicts_least_recent():
+    a, b = tasks(["libero_spatial"])[:2]
+    with EnvCache(capacity=1) as cache:
+        e1 = cache.get(a)
+        assert cache.get(a) is e1 and cache.builds == 1
+        e2 = cache.get(b)
+        assert e2 is not e1 and cache.builds == 2
+        assert cache.get(a) is not e1 and cache.builds == 3
