@@ -79,6 +79,10 @@ class ScriptedNoise(_Strict):
 
 class ScriptedPolicyConfig(_Strict):
     noise: ScriptedNoise = ScriptedNoise()
+    # actions returned per query at most (fewer when a motion primitive ends early)
+    chunk_len: int = Field(default=8, ge=1, le=32)
+    # tries per goal conjunct (re-grasp after a miss or a drop) before moving on
+    max_attempts: int = Field(default=3, ge=1)
 
 
 class OpenpiPolicyConfig(_Strict):
@@ -125,10 +129,15 @@ class Stage1Config(_Strict):
 
 
 class SamplingConfig(_Strict):
+    """How a video is turned into VLM input (see pipeline/vlm/video_input.py)."""
+
+    # target frames per second; the effective rate is source_fps / round(source_fps / fps),
+    # so 1, 2 or 4 on a 20 Hz video (Qwen2.5-VL's time ids want 1, 2 or 4)
     fps: float = Field(default=2.0, gt=0)
     max_frames: int = Field(default=768, ge=4)
-    max_pixels: int = Field(default=224 * 224, ge=28 * 28)
-    draw_timestamp: bool = False
+    max_pixels: int = Field(default=224 * 224, ge=28 * 28)  # per frame, aspect kept
+    draw_timestamp: bool = False  # write "12.5s" into each frame
+    jpeg_quality: int = Field(default=90, ge=10, le=100)
 
 
 class OpenAIBackendConfig(_Strict):
@@ -141,17 +150,28 @@ class OpenAIBackendConfig(_Strict):
     max_tokens: int = Field(default=4096, ge=16)
     temperature: float = Field(default=0.0, ge=0.0)
     video_mode: Literal["mp4", "frames"] = "frames"
+    # send the true fps / frame indices per request as `media_io_kwargs` (the server must run
+    # with --trust-request-mm-kwargs); off: the server's --media-io-kwargs fps must equal
+    # sampling.fps (frames mode) -- see README
+    send_media_io_kwargs: bool = False
+    backoff_base_s: float = Field(default=1.0, ge=0.0)  # retry i waits base * 2**i (+ jitter)
+    backoff_max_s: float = Field(default=30.0, ge=0.0)
+    enable_thinking: bool | None = None  # passed as chat_template_kwargs when set
 
 
 class TransformersBackendConfig(_Strict):
     model_path: Path | None = None
     max_new_tokens: int = Field(default=1024, ge=1)
     device: str = "cpu"
+    dtype: Literal["auto", "float32", "bfloat16", "float16"] = "auto"
+    enable_thinking: bool | None = None  # passed to the chat template when set
 
 
 class VLMConfig(_Strict):
     backend: Literal["simstate", "openai", "transformers"] = "simstate"
     language: Literal["zh", "en"] = "zh"
+    prompt_version: str = "v1"  # prompts/<task>.<version>.<language>.md
+    prompts_dir: Path | None = None  # default: the repository's prompts/
     sampling: SamplingConfig = SamplingConfig()
     openai: OpenAIBackendConfig = OpenAIBackendConfig()
     transformers: TransformersBackendConfig = TransformersBackendConfig()
@@ -162,6 +182,10 @@ class VLMConfig(_Strict):
 class Stage2Config(_Strict):
     vlm: VLMConfig = VLMConfig()
     history_frames: int = Field(default=8, ge=0)
+    # pre-failure history: every k-th step before the onset, rendered from the logged states
+    history_stride_steps: int = Field(default=1, ge=1)
+    history_cameras: list[Literal["agentview", "robot0_eye_in_hand"]] = Field(default_factory=lambda: ["agentview"])
+    history_resolution: int = Field(default=224, ge=32, le=1024)
     # during-failure ends when every object's speed stays under this (m/s) ...
     settle_speed_mps: float = Field(default=0.01, gt=0)
     # ... for this many consecutive steps
@@ -180,9 +204,14 @@ class Stage3Config(_Strict):
 
 class ReleaseConfig(_Strict):
     output_dir: Path | None = None  # default: <run.output_dir>/release
-    certify_tries: int = Field(default=2, ge=0)
+    certify_tries: int = Field(default=2, ge=0)  # scripted-expert tries per scene; 0 = skip
+    certify_horizon: int = Field(default=400, ge=1)
     settle_check_steps: int = Field(default=5, ge=1)
     settle_threshold_m: float = Field(default=0.005, gt=0)
+    # LeRobot v2.1 export (`recover export-lerobot`); default folder <run.output_dir>/lerobot
+    lerobot_dir: Path | None = None
+    lerobot_image_size: int = Field(default=256, ge=32, le=1024)
+    lerobot_episodes: Literal["failures", "all"] = "all"  # which stage-1 rollouts to export
 
 
 class EvalConfig(_Strict):
@@ -194,7 +223,16 @@ class EvalConfig(_Strict):
     horizon: int = Field(default=520, ge=1)
     chunk_sizes: list[int] = Field(default_factory=lambda: [8])
     temporal_context: Literal["none", "initial_frame", "history"] = "none"
+    # scenes: a released set (with scenarios.parquet) or stage-2 output; default: the run's
+    # release folder if it exists, else <run>/stage2
+    scenes_dir: Path | None = None
+    max_scenes: int | None = Field(default=None, ge=1)  # first N scenes (sorted), for smoke runs
+    # RD reruns from states every rd_every_steps along the source rollouts (stage-1 folder;
+    # default <run>/stage1), at the first chunk size only, rd_trials per start state
+    rd: bool = True
+    stage1_dir: Path | None = None
     rd_every_steps: int = Field(default=20, ge=1)
+    rd_trials: int = Field(default=1, ge=1)
     epsilon: float = Field(default=1e-3, gt=0)
 
 

