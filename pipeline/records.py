@@ -219,6 +219,7 @@ class Localization(Record):
     history: str | None = None
     events: list[SimEvent] = Field(default_factory=list)
     simstate_time_s: float | None = None  # the simstate localizer's onset, when run beside a VLM
+    evidence: str | None = None  # per-step evidence parquet, relative to the stage2 folder
 
 
 class QuarantineEntry(Record):
@@ -233,6 +234,12 @@ class QuarantineEntry(Record):
     model: str | None = None
     prompt_name: str | None = None
     prompt_hash: str | None = None
+    # stage 2: where a reviewer could start looking when no onset was found (e.g. the step
+    # the robot went idle), the simulator events seen, and the evidence file (stage2-relative)
+    fallback_step: int | None = None
+    fallback_time_s: float | None = None
+    events: list[SimEvent] = Field(default_factory=list)
+    evidence: str | None = None
 
 
 # Per-step simulator evidence of an episode, shown to reviewers and used by simstate rules.
@@ -245,6 +252,13 @@ EVIDENCE_SCHEMA = pa.schema(
         pa.field("contacts", pa.list_(pa.string()), nullable=False),  # "a|b" pairs, sorted names
         pa.field("displacement", pa.map_(pa.string(), pa.float32()), nullable=False),  # m from start
         pa.field("goal_progress", pa.float32(), nullable=False),  # share of goal conjuncts true
+        # added by stage 2 (see pipeline/evidence.py): what the simstate rules also need
+        pa.field("gripper_command", pa.float32(), nullable=False),  # gripper action (+1 close)
+        pa.field("lift", pa.map_(pa.string(), pa.float32()), nullable=False),  # m, z - start z
+        pa.field("tilt_deg", pa.map_(pa.string(), pa.float32()), nullable=False),  # up axis vs start
+        pa.field("speed", pa.map_(pa.string(), pa.float32()), nullable=False),  # m/s, free joint
+        pa.field("eef_distance", pa.map_(pa.string(), pa.float32()), nullable=False),  # grip site, m
+        pa.field("position", pa.map_(pa.string(), pa.list_(pa.float32(), 3)), nullable=False),  # world xyz
     ],
     metadata={"schema_version": str(SCHEMA_VERSION)},
 )
@@ -261,3 +275,61 @@ class Characterization(Record):
     prompt_name: str | None = None
     prompt_hash: str | None = None
     raw_text: str | None = None
+
+
+# ---- stage 3: final reviewed annotations (the export of the review queue) ---------------
+class AnnotationProposal(Record):
+    """What the models proposed, as shown to reviewers (values are None when quarantined)."""
+
+    fail_time_s: float | None = None
+    fail_step: int | None = None
+    recovery_level: Level | None = None
+    failure_category: Category | None = None
+    recovery_action: str | None = None
+    localizer: dict = Field(default_factory=dict)  # source, model, prompt_name, prompt_hash
+    characterizer: dict = Field(default_factory=dict)
+
+
+class AnnotationReview(Record):
+    reviewer: str
+    decision: str  # accept | revise | flag
+    fail_time_s: float | None = None
+    fail_step: int | None = None
+    recovery_level: Level | None = None
+    failure_category: Category | None = None
+    recovery_action: str | None = None
+    edited: list[str] = Field(default_factory=list)
+    flag_reason: str | None = None
+    at: str
+
+
+class AnnotationAdjudication(Record):
+    adjudicator: str
+    rationale: str
+    fields: list[str]  # the disputed fields this adjudication decided
+    at: str
+
+
+class Annotation(Record):
+    """One final, human-reviewed failure label: `annotations/<suite>/<task>/episode_<id>.json`."""
+
+    key: str
+    suite: str
+    task: str
+    episode_id: str
+    revision: int
+    instruction: str
+    fail_time_s: float
+    fail_step: int
+    recovery_level: Level
+    failure_category: Category
+    recovery_action: str = Field(min_length=1, max_length=200)
+    resolution: str  # agreed | adjudicated
+    quarantined: bool = False  # the model's output was quarantined; people supplied the values
+    quarantine_reason: str | None = None
+    model_proposal: AnnotationProposal
+    reviews: list[AnnotationReview]
+    adjudication: AnnotationAdjudication | None = None
+    scene_bddl: str | None = None  # stage-2 snapshot at the *model's* failure step (relative to stage2/)
+    scene_state: str | None = None
+    finalized_at: str

@@ -214,6 +214,38 @@ class SimEnv:
             raise KeyError(f"no object or fixture {name!r} in task {self.task.task_id}")
         return self._geom_boxes(self._collision_geoms(bodies))
 
+    def object_corners(self, name: str) -> np.ndarray:
+        """(k*8, 3) world corners of the oriented boxes bounding an object's collision geoms."""
+        m = self.env.sim.model._model
+        d = self.env.sim.data._data
+        bodies = {b for b in range(len(self._owner)) if self._owner[b] == name}
+        signs = np.array([[i, j, k] for i in (-1, 1) for j in (-1, 1) for k in (-1, 1)], dtype=float)
+        out = []
+        for g in self._collision_geoms(bodies):
+            rot = d.geom_xmat[g].reshape(3, 3)
+            local = m.geom_aabb[g, :3] + signs * m.geom_aabb[g, 3:]
+            out.append(d.geom_xpos[g] + local @ rot.T)
+        return np.concatenate(out) if out else np.empty((0, 3))
+
+    def ray_down(self, xy: np.ndarray, z_from: float, z_to: float) -> float | None:
+        """Height of the first non-robot collision surface straight below (xy, z_from), or
+        None when nothing lies above `z_to`."""
+        import mujoco
+
+        m = self.env.sim.model._model
+        d = self.env.sim.data._data
+        geom = np.array([-1], dtype=np.int32)
+        groups = np.array([1, 0, 0, 0, 0, 0], dtype=np.uint8)  # LIBERO's collision geoms: group 0
+        z = float(z_from)
+        while z > z_to:
+            dist = mujoco.mj_ray(m, d, np.array([xy[0], xy[1], z]), np.array([0.0, 0.0, -1.0]), groups, 1, -1, geom)
+            if dist < 0 or z - dist < z_to:
+                return None
+            if self._owner[m.geom_bodyid[geom[0]]] != "robot":
+                return z - dist
+            z = z - dist - 1e-4  # passed through the robot's own geometry: look further down
+        return None
+
     def object_aabb(self, name: str) -> tuple[np.ndarray, np.ndarray]:
         """World axis-aligned bounding box (lo, hi) of an object's collision geoms."""
         boxes = self.object_boxes(name)

@@ -1,0 +1,112 @@
+"""Stage 2 for one failed episode: evidence -> onset -> phases -> scene + history -> record.
+
+Inputs: the task's built `SimEnv`, the episode's stage-1 logs, the config and (when a VLM
+backend ran) its stored outcome. Outputs, all written atomically: the evidence parquet
+(always, so reviewers see it even for quarantined episodes), then EITHER a scene pair +
+history + Localization JSON, OR a QuarantineEntry JSON saying why. Returns an `Outcome`.
+
+The onset comes from the VLM when one ran (its time mapped to a step through stage 1's
+frame table), else from the simstate rules; simstate always runs, and its time is kept
+beside the VLM's (`simstate_time_s`) for the agreement report.
+Quarantine reasons from here: no_failure_found (simstate saw no event; carries the idle
+fallback step), goal_satisfied_at_onset, bddl_*, state_shape, stage1_* (bad inputs), and a
+VLM parse/backend reason (truncated, no_json, schema, out_of_range, backend_error, ...).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from pipeline.atomic import write_json
+from pipeline.config import Stage2Config
+from pipeline.errors import EpisodeError
+from pipeline.evidence import compute_evidence, write_evidence
+from pipeline.records import EpisodeRecord, Localization, QuarantineEntry
+from pipeline.stage2.history import build_history, write_history
+from pipeline.stage2.layout import Stage2Paths, load_episode
+from pipeline.stage2.phases import split_phases, step_for_time
+from pipeline.stage2.scenes import scene_stem, write_scene
+from pipeline.stage2.simstate import localize
+
+
+@dataclass
+class Outcome:
+    key: str
+    status: str  # scene | quarantine
+    reason: str = ""
+    onset_step: int | None = None
+    simstate_step: int | None = None
+    source: str = "simstate"
+    onset_kind: str = ""
+
+
+def _quarantine(paths: Stage2Paths, rec: EpisodeRecord, entry: QuarantineEntry) -> Outcome:
+    paths.abs(paths.localization(rec)).unlink(missing_ok=True)
+    write_json(paths.abs(paths.quarantine(rec)), entry.model_dump(mode="json"))
+    return Outcome(key=rec.key, status="quarantine", reason=entry.reason, source=entry.source)
+
+
+def process_episode(env, rec: EpisodeRecord, stage1: Path, paths: Stage2Paths, cfg: Stage2Config,
+                    vlm: dict | None = None) -> Outcome:
+    """`vlm`: None for simstate, else {"source", "model", "prompt_name", "prompt_hash", "raw_text",
+    and either "fail_time_s" or "reason" (+ "detail")} as stored by the VLM step."""
+    try:
+        ep = load_episode(stage1, rec)
+    except EpisodeError as e:
+        return _quarantine(paths, rec, QuarantineEntry(key=rec.key, stage="stage2", source="stage2",
+                                                       reason=e.reason, detail=e.detail))
+    actions = ep.steps["action"]
+    grip = actions[:, 6] if len(actions) else np.zeros(0)
+    ev = compute_evidence(env, ep.states, grip, rec.control_hz)
+    ev_rel = paths.evidence(rec)
+    write_evidence(paths.abs(ev_rel), ev)
+    sim = localize(ev)
+    source = vlm["source"] if vlm else "simstate"
+    trace = {k: (vlm or {}).get(k) for k in ("model", "prompt_name", "prompt_hash", "raw_text")}
+
+    def quarantine(reason: str, detail: str, **extra) -> Outcome:
+        entry = QuarantineEntry(key=rec.key, stage="stage2", source=source, reason=reason, detail=detail,
+                                events=sim.events, evidence=str(ev_rel), **trace, **extra)
+        return _quarantine(paths, rec, entry)
+
+    if vlm is not None and "fail_time_s" not in vlm:
+        return quarantine(vlm.get("reason", "backend_error"), vlm.get("detail", ""))
+    if vlm is not None:
+        onset = step_for_time(float(vlm["fail_time_s"]), ep.frames, rec.steps, rec.control_hz)
+    elif sim.onset_step is not None:
+        onset = sim.onset_step
+    else:
+        fb = sim.fallback_step
+        return quarantine("no_failure_found",
+                          f"simstate saw no failure event; the robot was idle from step {fb} "
+                          f"({fb / rec.control_hz:.1f} s), a fallback onset for review",
+                          fallback_step=fb, fallback_time_s=fb / rec.control_hz)
+    onset = min(onset, rec.steps)
+    try:
+        bddl, npy = write_scene(paths.root, env, rec.suite, rec.task, rec.episode_id, onset, ep.states[onset])
+    except EpisodeError as e:
+        return quarantine(e.reason, e.detail)
+    history_rel = None
+    if cfg.history_frames > 0:
+        hist = build_history(env, ep.states, ep.steps, onset, cfg.history_frames, cfg.history_stride_steps,
+                             list(cfg.history_cameras), cfg.history_resolution, rec.control_hz)
+        hist_path = bddl.parent / f"{scene_stem(onset)}_history.npz"
+        write_history(hist_path, hist)
+        history_rel = str(hist_path.relative_to(paths.root))
+    loc = Localization(
+        key=rec.key, suite=rec.suite, task=rec.task, episode_id=rec.episode_id, instruction=rec.instruction,
+        source=source, **trace, fail_step=onset,
+        fail_time_s=float(vlm["fail_time_s"]) if vlm else round(onset / rec.control_hz, 3),
+        phases=split_phases(ev, onset, cfg.settle_speed_mps, cfg.settle_steps),
+        scene_bddl=str(bddl.relative_to(paths.root)), scene_state=str(npy.relative_to(paths.root)),
+        history=history_rel, events=sim.events, evidence=str(ev_rel),
+        simstate_time_s=None if sim.onset_step is None else sim.onset_step / rec.control_hz,
+    )
+    paths.abs(paths.quarantine(rec)).unlink(missing_ok=True)
+    write_json(paths.abs(paths.localization(rec)), loc.model_dump(mode="json"))
+    kind = sim.onset_event.kind if (vlm is None and sim.onset_event) else ""
+    return Outcome(key=rec.key, status="scene", onset_step=onset, simstate_step=sim.onset_step, source=source,
+                   onset_kind=kind)

@@ -1,0 +1,86 @@
+"""Stage 2's compiled outputs: the localization table, the agreement report, the summary.
+
+Inputs: the per-episode Localization / QuarantineEntry JSON files under the stage-2 folder.
+Outputs (rewritten from those files on every run, so they always match them):
+    localizations.parquet            one row per Localization (phases flattened, events as JSON)
+    agreement.json + agreement.png   when a VLM ran beside simstate: MAE and shares within
+                                     +-0.5 s / +-1 s of |vlm - simstate| (pipeline.vlm.agreement),
+                                     and a histogram of the signed differences
+    summary.json                     counts: scenes, quarantined by reason, by onset event kind
+"""
+
+from __future__ import annotations
+
+import json
+from collections import Counter
+from pathlib import Path
+
+import pyarrow as pa
+import pyarrow.parquet as pq
+
+from pipeline.atomic import write_json, write_with
+from pipeline.records import Localization, QuarantineEntry
+
+
+def load_outputs(stage2: Path) -> tuple[list[Localization], list[QuarantineEntry]]:
+    locs = [Localization.model_validate_json(p.read_text()) for p in sorted((stage2 / "localizations").rglob("*.json"))]
+    quar = [QuarantineEntry.model_validate_json(p.read_text()) for p in sorted((stage2 / "quarantine").rglob("*.json"))]
+    return locs, quar
+
+
+def localization_table(locs: list[Localization]) -> pa.Table:
+    rows = []
+    for loc in locs:
+        row = loc.model_dump(mode="json", exclude={"phases", "events"})
+        for name in ("pre", "during", "post"):
+            row[f"{name}_start"], row[f"{name}_end"] = getattr(loc.phases, name)
+        row["onset_kind"] = next((e.kind for e in loc.events if e.step == loc.fail_step), None)
+        row["events"] = json.dumps([e.model_dump(mode="json") for e in loc.events])
+        rows.append(row)
+    return pa.Table.from_pylist(rows)
+
+
+def write_agreement(stage2: Path, locs: list[Localization]) -> dict | None:
+    vlm = [loc for loc in locs if loc.source != "simstate"]
+    if not vlm:
+        return None
+    from pipeline.vlm.agreement import agreement
+
+    pairs = [(loc.fail_time_s, loc.simstate_time_s) for loc in vlm if loc.simstate_time_s is not None]
+    result = agreement(pairs).model_dump()
+    result.update(vlm_localized=len(vlm), simstate_missing=len(vlm) - len(pairs),
+                  sources=sorted({f"{loc.source}:{loc.model}" for loc in vlm}))
+    write_json(stage2 / "agreement.json", result)
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(5, 3), dpi=120)
+    diffs = [a - b for a, b in pairs]
+    ax.hist(diffs or [0.0], bins=max(5, min(40, len(diffs))), color="#4477aa")
+    for x in (-1, -0.5, 0.5, 1):
+        ax.axvline(x, color="grey", lw=0.8, ls="--")
+    ax.set_xlabel("VLM onset - simstate onset (s)")
+    ax.set_ylabel("episodes")
+    mae = "n/a" if result["mae_s"] is None else f"{result['mae_s']:.2f} s"
+    ax.set_title(f"n={result['n']}  MAE={mae}")
+    fig.tight_layout()
+    write_with(stage2 / "agreement.png", lambda p: fig.savefig(p, format="png"))
+    plt.close(fig)
+    return result
+
+
+def write_reports(stage2: Path) -> dict:
+    locs, quar = load_outputs(stage2)
+    table = localization_table(locs)
+    write_with(stage2 / "localizations.parquet", lambda p: pq.write_table(table, p))
+    summary = {
+        "scenes": len(locs),
+        "quarantined": len(quar),
+        "quarantine_reasons": dict(Counter(q.reason for q in quar)),
+        "onset_kinds": dict(Counter(r for r in table.column("onset_kind").to_pylist()) if locs else {}),
+        "agreement": write_agreement(stage2, locs),
+    }
+    write_json(stage2 / "summary.json", summary)
+    return summary

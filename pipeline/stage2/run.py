@@ -1,0 +1,116 @@
+"""Stage 2: localize failure onsets, split phases, write recovery scenes and histories.
+
+Input: stage 1's run layout (pipeline/records.py): `stage1/episodes.parquet` and each
+episode's states.npy / steps.parquet / frames.parquet / videos. Successful episodes are
+skipped. Every failed episode ends with EITHER a scene pair (+ history + Localization) OR a
+QuarantineEntry saying why -- never nothing.
+
+Output layout, under `<run.output_dir>/stage2/`:
+    config.resolved.yaml
+    evidence/<suite>/<task>/<episode_id>.parquet       per-step simulator evidence (EVIDENCE_SCHEMA)
+    localizations/<suite>/<task>/<episode_id>.json     one Localization per localized episode
+    quarantine/<suite>/<task>/<episode_id>.json        one QuarantineEntry (reason, raw text)
+    vlm/<suite>/<task>/<episode_id>.json               the VLM's stored answer (VLM backends only)
+    selected_bddl_scenes_<suite>/<task>/episode_<episode_id>/
+        step_<NNNN>.bddl                               the task's BDDL, one declaration line per type
+        step_<NNNN>_sim_state.npy                      flattened MuJoCo state at the onset
+        step_<NNNN>_history.npz                        pre-failure window (pipeline/stage2/history.py)
+    localizations.parquet                              all Localizations, compiled
+    agreement.json, agreement.png                      VLM vs simstate (when a VLM ran)
+    summary.json
+    _done/<suite>__<task>__<episode_id>.done           completion markers, written last
+
+Flow: (1) with a VLM backend, ask it about every pending episode (vlm_step, main process,
+`max_in_flight` concurrent requests); (2) the executor runs one unit per task (the env is
+built once per task): evidence -> simstate -> onset -> phases -> scene -> history -> record;
+(3) compile the reports. Resumable: episodes with a done marker are skipped; reports are
+rebuilt from the per-episode files every time.
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+
+from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.table import Table
+
+from pipeline.config import Config, save_resolved
+from pipeline.errors import FatalError
+from pipeline.executors import make_executor
+from pipeline.records import EpisodeRecord, read_episodes
+from pipeline.stage2.layout import Stage2Paths, unit_id
+from pipeline.stage2.report import write_reports
+from pipeline.stage2.worker import TaskUnit, process_task
+
+console = Console()
+
+
+def pending_failures(cfg: Config, paths: Stage2Paths) -> tuple[list[EpisodeRecord], int, int]:
+    """(failed episodes not yet done, failed total, successes skipped)."""
+    from pipeline.atomic import Completions
+
+    manifest = cfg.out / "stage1" / "episodes.parquet"
+    if not manifest.exists():
+        raise FatalError(f"{manifest}: no stage 1 manifest; run `recover stage1` first")
+    episodes = read_episodes(manifest)
+    failed = [e for e in episodes if not e.success]
+    done = Completions(paths.root).done_ids()
+    return [e for e in failed if unit_id(e) not in done], len(failed), len(episodes) - len(failed)
+
+
+def task_units(cfg: Config, episodes: list[EpisodeRecord]) -> list[TaskUnit]:
+    by_task: dict[tuple[str, str], list[EpisodeRecord]] = defaultdict(list)
+    for e in episodes:
+        by_task[(e.suite, e.task)].append(e)
+    return [TaskUnit(suite=s, task=t, episodes=tuple(e.model_dump_json() for e in eps), run_dir=str(cfg.out),
+                     stage2_cfg=cfg.stage2.model_dump_json()) for (s, t), eps in sorted(by_task.items())]
+
+
+def _progress() -> Progress:
+    return Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                    TextColumn("{task.fields[note]}"), console=console)
+
+
+def run(cfg: Config) -> dict:
+    paths = Stage2Paths(cfg.out / "stage2")
+    paths.root.mkdir(parents=True, exist_ok=True)
+    save_resolved(cfg, paths.root)
+    todo, n_failed, n_success = pending_failures(cfg, paths)
+    console.print(f"stage 2: {n_failed} failed episodes ({n_success} successes skipped), "
+                  f"{len(todo)} to do, localizer [bold]{cfg.stage2.vlm.backend}[/bold]")
+    with _progress() as prog:
+        if todo and cfg.stage2.vlm.backend != "simstate":
+            from pipeline.stage2.vlm_step import run_vlm
+
+            bar = prog.add_task("VLM localization", total=len(todo), note="")
+            run_vlm(cfg, todo, paths, on_result=lambda: prog.advance(bar))
+        bar = prog.add_task("episodes", total=len(todo), note="")
+        counts: dict[str, int] = defaultdict(int)
+
+        def on_event(ev: dict) -> None:
+            counts[ev["status"] if ev["status"] == "scene" else f"q:{ev['reason']}"] += 1
+            prog.update(bar, advance=1, note=" ".join(f"{k}={v}" for k, v in sorted(counts.items())))
+
+        units = task_units(cfg, todo)
+        if units:
+            make_executor(cfg.executor).run(process_task, units, on_event=on_event)
+    summary = write_reports(paths.root)
+    _print_summary(summary, n_failed)
+    return summary
+
+
+def _print_summary(summary: dict, n_failed: int) -> None:
+    table = Table(title=f"stage 2: {n_failed} failed episodes")
+    table.add_column("outcome")
+    table.add_column("episodes", justify="right")
+    table.add_row("scene pair", str(summary["scenes"]))
+    for reason, n in sorted(summary["quarantine_reasons"].items()):
+        table.add_row(f"quarantined: {reason}", str(n))
+    for kind, n in sorted(summary["onset_kinds"].items(), key=lambda kv: str(kv[0])):
+        table.add_row(f"  onset event: {kind or 'vlm'}", str(n))
+    agr = summary.get("agreement")
+    if agr and agr.get("n"):
+        table.add_row("VLM vs simstate MAE (s)", f"{agr['mae_s']:.2f}")
+        table.add_row("within 0.5 s / 1 s", f"{agr['within_0_5s']:.0%} / {agr['within_1s']:.0%}")
+    console.print(table)

@@ -1,0 +1,61 @@
+"""Stage 2 work unit: the pending failed episodes of one task, run in one worker process.
+
+Input: a `TaskUnit` (picklable). The worker builds the task's environment once (through a
+per-process `EnvCache`), runs `process_episode` for each episode not yet done, marks each
+done after its outputs exist, and emits one progress event per episode. A per-episode
+EpisodeError has already become a quarantine entry; anything else stops the run.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+from pipeline.atomic import Completions
+from pipeline.config import Stage2Config
+from pipeline.records import EpisodeRecord
+
+_CACHE = None  # per worker process: the last task's environment
+
+
+@dataclass(frozen=True)
+class TaskUnit:
+    suite: str
+    task: str
+    episodes: tuple[str, ...]  # EpisodeRecord JSON
+    run_dir: str
+    stage2_cfg: str  # Stage2Config JSON
+
+
+def _env_for(suite: str, task: str):
+    global _CACHE
+    from pipeline.sim import EnvCache, get_task
+
+    if _CACHE is None:
+        _CACHE = EnvCache(capacity=1)
+    return _CACHE.get(get_task(suite, task))
+
+
+def process_task(unit: TaskUnit, emit) -> list[dict]:
+    from pipeline.stage2.episode import process_episode
+    from pipeline.stage2.layout import Stage2Paths, unit_id
+
+    run = Path(unit.run_dir)
+    cfg = Stage2Config.model_validate_json(unit.stage2_cfg)
+    paths = Stage2Paths(run / "stage2")
+    done = Completions(paths.root)
+    env = _env_for(unit.suite, unit.task)
+    results = []
+    for raw in unit.episodes:
+        rec = EpisodeRecord.model_validate_json(raw)
+        vlm_file = paths.abs(paths.vlm(rec))
+        vlm = json.loads(vlm_file.read_text()) if cfg.vlm.backend != "simstate" and vlm_file.exists() else None
+        if cfg.vlm.backend != "simstate" and vlm is None:
+            vlm = {"source": cfg.vlm.backend, "reason": "backend_error", "detail": "no stored VLM result"}
+        out = process_episode(env, rec, run / "stage1", paths, cfg, vlm)
+        done.mark_done(unit_id(rec), {"status": out.status, "reason": out.reason})
+        row = out.__dict__.copy()
+        results.append(row)
+        emit({"episode": rec.key, **row})
+    return results
