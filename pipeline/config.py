@@ -193,12 +193,16 @@ class Stage2Config(_Strict):
 
 
 class Stage3Config(_Strict):
-    vlm: VLMConfig = VLMConfig()
-    db_url: str | None = None  # default: sqlite:///<output_dir>/review.sqlite
-    reviews_per_item: int = Field(default=2, ge=1)
-    time_tolerance_s: float = Field(default=0.5, ge=0)
-    lease_seconds: int = Field(default=900, ge=10)
-    host: str = "127.0.0.1"
+    """Characterization and the human review queue (see pipeline/stage3, pipeline/review)."""
+
+    vlm: VLMConfig = VLMConfig()  # backend simstate (default) | openai | transformers
+    # any SQLAlchemy URL, e.g. postgresql+psycopg://user@host/db; default: SQLite at
+    # <output_dir>/stage3/review.sqlite (WAL, busy timeout)
+    db_url: str | None = None
+    reviews_per_item: int = Field(default=2, ge=1)  # K independent reviews per item
+    time_tolerance_s: float = Field(default=0.5, ge=0)  # failure times agree within +-this
+    lease_seconds: int = Field(default=900, ge=10)  # an absent reviewer's hold expires
+    host: str = "127.0.0.1"  # `recover review serve` (loopback unless you mean otherwise)
     port: int = Field(default=8765, ge=1, le=65535)
 
 

@@ -1,0 +1,1 @@
+"""Recovery evaluation: the protocol (`protocol`), records, metrics (RSR, RC, RD) and reports."""

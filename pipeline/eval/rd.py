@@ -1,0 +1,68 @@
+"""Start states for recovery degradation (RD): every `every` steps along a failed rollout.
+
+Inputs: a stage-1 episode folder (`states.npy`, (steps+1, state_dim), row t = the state
+before action t; `steps.parquet`, the step log with the actions) and the failure-onset
+step of the scene cut from it.
+Output: `RDStart`s at t = 0, every, 2*every, ... (<= the last row), each labelled `pre`
+(t < onset) or `post` (t >= onset), with the gripper command that was in force at t
+(the sign of action t-1's gripper; open at t = 0): the rerun initializes the gripper to it,
+because the command ramp is not in the saved state (see `pipeline.sim.env`).
+
+Invariant: pure given the files; the same rollout and onset always give the same starts.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class RDStart:
+    start_step: int
+    phase: str  # pre | post
+    gripper: str  # open | closed
+
+
+def start_steps(n_states: int, onset: int, every: int) -> list[tuple[int, str]]:
+    """(step, phase) of the RD start states of a rollout with `n_states` saved states."""
+    if every < 1:
+        raise ValueError(f"every must be >= 1, got {every}")
+    if not 0 <= onset < n_states:
+        raise ValueError(f"onset step {onset} is outside the rollout's states [0, {n_states})")
+    return [(t, "pre" if t < onset else "post") for t in range(0, n_states, every)]
+
+
+def gripper_commands(actions: np.ndarray) -> list[str]:
+    """Gripper command in force before each step t (len(actions) + 1 entries)."""
+    out = ["open"]
+    for a in actions:
+        out.append("closed" if a[6] > 0 else "open")
+    return out
+
+
+def episode_dir(stage1_dir: str | Path, suite: str, task: str, episode_id: str) -> Path:
+    return Path(stage1_dir) / "episodes" / suite / task / episode_id
+
+
+def rd_starts(folder: str | Path, onset: int, every: int) -> list[RDStart]:
+    """RD start states of one stage-1 episode folder; FileNotFoundError names what is missing."""
+    import pyarrow.parquet as pq
+
+    folder = Path(folder)
+    states_path, steps_path = folder / "states.npy", folder / "steps.parquet"
+    for p in (states_path, steps_path):
+        if not p.is_file():
+            raise FileNotFoundError(f"{p}: missing (needed for RD reruns)")
+    n_states = np.load(states_path, mmap_mode="r").shape[0]
+    actions = np.asarray(pq.read_table(steps_path, columns=["action"]).column("action").to_pylist(), dtype=np.float64)
+    if len(actions) != n_states - 1:
+        raise ValueError(f"{folder}: {n_states} states but {len(actions)} logged actions (need states = actions + 1)")
+    grip = gripper_commands(actions.reshape(-1, 7))
+    return [RDStart(t, phase, grip[t]) for t, phase in start_steps(n_states, onset, every)]
+
+
+def load_start_state(folder: str | Path, step: int) -> np.ndarray:
+    return np.array(np.load(Path(folder) / "states.npy", mmap_mode="r")[step], dtype=np.float64)

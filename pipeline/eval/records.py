@@ -1,0 +1,152 @@
+"""Evaluation episode records: one row per trial, with its trajectory, in Parquet.
+
+Outputs (under `<run.output_dir>/eval/`):
+    trials/<unit_id>.parquet   one row (EVAL_SCHEMA) per finished trial, written atomically
+    _done/<unit_id>.done       the trial's completion marker, written after its row
+    episodes.parquet           all rows gathered (the input of `metrics` and `report`)
+
+Invariants: a row holds everything the metrics need (scene, task, suite, level, gripper
+condition, mode, RD phase, policy, chunk size, success), so metrics are pure functions of
+the rows. `unit_id` is a flat, file-safe name unique within a run.
+"""
+
+from __future__ import annotations
+
+import re
+from enum import Enum
+from pathlib import Path
+
+import pyarrow as pa
+import pyarrow.parquet as pq
+from pydantic import Field
+
+from pipeline import SCHEMA_VERSION
+from pipeline.atomic import write_with
+from pipeline.records import Record
+
+
+class GripperCondition(str, Enum):
+    open = "open"
+    closed = "closed"
+
+
+class TrialMode(str, Enum):
+    scene = "scene"  # from a recovery scene: the RSR / RC population
+    rd = "rd"  # from a state along the original failed rollout: the RD population
+
+
+class RDPhase(str, Enum):
+    pre = "pre"  # start state before the failure onset
+    post = "post"  # start state at or after the onset
+
+
+class EvalEpisode(Record):
+    mode: TrialMode = TrialMode.scene
+    scene_id: str  # <suite>/<task>/<episode>/step_<NNNN>
+    suite: str
+    task: str
+    instruction: str
+    episode_id: str  # the failed source episode
+    scene_step: int  # failure onset step of the source episode
+    level: str | None = None  # L1..L4 from the release manifest; None when unlabeled
+    category: str | None = None
+    policy: str
+    policy_kind: str
+    gripper: GripperCondition
+    trial: int
+    seed: int  # the run seed; trial randomness derives from (seed, scene_id, trial)
+    policy_seed: int
+    chunk_size: int
+    horizon: int
+    temporal_context: str = "none"
+    offsets: dict[str, tuple[float, float]] = Field(default_factory=dict)  # object -> (dx, dy) m
+    gripper_settle_steps: int
+    init_eef_drift_m: float  # how far the arm moved while the gripper was initialized
+    init_gripper_opening: float  # finger-joint distance after initialization, m
+    rd_phase: RDPhase | None = None
+    rd_start_step: int | None = None  # step of the source rollout the rerun started from
+    steps: int
+    success: bool
+    first_success_step: int | None = None
+    wall_time_s: float
+    actions: list[list[float]] = Field(default_factory=list)  # (steps, 7)
+    eef_pos: list[list[float]] = Field(default_factory=list)  # (steps + 1, 3), row 0 = start
+
+    def unit_id(self) -> str:
+        return unit_id(self.policy, self.chunk_size, self.mode.value, self.scene_id, self.gripper.value,
+                       self.trial, self.rd_start_step)
+
+
+def unit_id(policy: str, chunk: int, mode: str, scene_id: str, gripper: str, trial: int,
+            rd_start_step: int | None = None) -> str:
+    parts = [policy, f"c{chunk}", mode, scene_id, gripper, f"t{trial}"]
+    if rd_start_step is not None:
+        parts.append(f"s{rd_start_step:04d}")
+    return re.sub(r"[^A-Za-z0-9._-]+", "_", "__".join(parts).replace("/", "__"))
+
+
+_F32_LIST = pa.list_(pa.float32())
+EVAL_SCHEMA = pa.schema(
+    [
+        pa.field("schema_version", pa.int32(), nullable=False),
+        pa.field("mode", pa.string(), nullable=False),
+        pa.field("scene_id", pa.string(), nullable=False),
+        pa.field("suite", pa.string(), nullable=False),
+        pa.field("task", pa.string(), nullable=False),
+        pa.field("instruction", pa.string(), nullable=False),
+        pa.field("episode_id", pa.string(), nullable=False),
+        pa.field("scene_step", pa.int32(), nullable=False),
+        pa.field("level", pa.string()),
+        pa.field("category", pa.string()),
+        pa.field("policy", pa.string(), nullable=False),
+        pa.field("policy_kind", pa.string(), nullable=False),
+        pa.field("gripper", pa.string(), nullable=False),
+        pa.field("trial", pa.int32(), nullable=False),
+        pa.field("seed", pa.int64(), nullable=False),
+        pa.field("policy_seed", pa.int64(), nullable=False),
+        pa.field("chunk_size", pa.int32(), nullable=False),
+        pa.field("horizon", pa.int32(), nullable=False),
+        pa.field("temporal_context", pa.string(), nullable=False),
+        pa.field("offsets", pa.map_(pa.string(), pa.list_(pa.float64(), 2)), nullable=False),
+        pa.field("gripper_settle_steps", pa.int32(), nullable=False),
+        pa.field("init_eef_drift_m", pa.float64(), nullable=False),
+        pa.field("init_gripper_opening", pa.float64(), nullable=False),
+        pa.field("rd_phase", pa.string()),
+        pa.field("rd_start_step", pa.int32()),
+        pa.field("steps", pa.int32(), nullable=False),
+        pa.field("success", pa.bool_(), nullable=False),
+        pa.field("first_success_step", pa.int32()),
+        pa.field("wall_time_s", pa.float64(), nullable=False),
+        pa.field("actions", pa.list_(_F32_LIST), nullable=False),
+        pa.field("eef_pos", pa.list_(_F32_LIST), nullable=False),
+    ],
+    metadata={"schema_version": str(SCHEMA_VERSION)},
+)
+
+
+def to_row(ep: EvalEpisode) -> dict:
+    row = ep.model_dump(mode="json")
+    row["offsets"] = [(k, list(v)) for k, v in row["offsets"].items()]
+    return row
+
+
+def episodes_table(episodes: list[EvalEpisode]) -> pa.Table:
+    return pa.Table.from_pylist([to_row(e) for e in episodes], schema=EVAL_SCHEMA)
+
+
+def write_episodes(path: str | Path, episodes: list[EvalEpisode]) -> None:
+    table = episodes_table(episodes)
+    write_with(path, lambda p: pq.write_table(table, p))
+
+
+def read_rows(path: str | Path, with_trajectory: bool = False) -> list[dict]:
+    """Rows as plain dicts (what `metrics` takes); trajectories only when asked (large)."""
+    columns = None if with_trajectory else [f.name for f in EVAL_SCHEMA if f.name not in ("actions", "eef_pos")]
+    rows = pq.read_table(path, columns=columns).to_pylist()
+    for r in rows:
+        r["offsets"] = {k: tuple(v) for k, v in (r["offsets"] or [])}
+    return rows
+
+
+def read_episodes(path: str | Path) -> list[EvalEpisode]:
+    return [EvalEpisode.model_validate(r) for r in read_rows(path, with_trajectory=True)]

@@ -1,0 +1,186 @@
+"""Evaluation report: markdown tables, `metrics.json` and PNG figures, from rows only.
+
+Inputs: evaluation rows (`records.read_rows`), the `EvalConfig` (epsilon, chunk sizes).
+Outputs in `out`: `report.md`; `metrics.json` (NaN written as null); `rsr_heatmap.png`
+(RSR per suite x level, one panel per policy); `gripper.png` (open vs closed);
+`chunk_sweep.png` (RSR per chunk size, when more than one was run).
+
+Tables use the first configured chunk size, except the sweep. Rates are percentages; an
+undefined rate (empty subset) is "—", and the trial count is shown beside every cell.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+from pipeline.atomic import write_json, write_text, write_with
+from pipeline.config import SUITES, EvalConfig
+from pipeline.eval import metrics as M
+
+LEVELS = ("L1", "L2", "L3", "L4")
+
+
+def pct(x: float) -> str:
+    return "—" if x is None or math.isnan(x) else f"{100 * x:.1f}"
+
+
+def _cell(rows, **where) -> str:
+    wins, n = M.counts(rows, **where)
+    return "—" if n == 0 else f"{pct(wins / n)} ({n})"
+
+
+def _nan_none(x: float) -> float | None:
+    return None if x is None or math.isnan(x) else round(float(x), 6)
+
+
+def _ordered(values, order) -> list:
+    present = set(values)
+    return [v for v in order if v in present] + sorted(v for v in present if v not in order and v is not None)
+
+
+def _levels(rows) -> list[str | None]:
+    """L1..L4 always (the main table's columns), then any other level, then unlabeled."""
+    lv = list(LEVELS) + [v for v in _ordered({r["level"] for r in rows}, LEVELS) if v not in LEVELS]
+    return lv + ([None] if any(r["level"] is None for r in rows) else [])
+
+
+def _table(header: list[str], body: list[list[str]]) -> str:
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    return "\n".join(lines + ["| " + " | ".join(r) + " |" for r in body]) + "\n"
+
+
+def compute(rows: list[dict], ecfg: EvalConfig) -> dict:
+    """Every number of the report, as plain data (NaN -> None)."""
+    chunk = ecfg.chunk_sizes[0]
+    out: dict = {"chunk_size": chunk, "epsilon": ecfg.epsilon, "policies": {}}
+    suites = _ordered({r["suite"] for r in rows}, SUITES)
+    for pol in _ordered({r["policy"] for r in rows}, []):
+        base = M.select(rows, policy=pol)
+        main = M.select(base, chunk_size=chunk)
+        res = {
+            "rsr": _nan_none(M.rsr(main)),
+            "rsr_suite_level": {s: {lv or "unlabeled": _nan_none(M.rsr(main, suite=s, level=lv)) for lv in _levels(main)}
+                                | {"all": _nan_none(M.rsr(main, suite=s))} for s in suites},
+            "rsr_level": {lv or "unlabeled": _nan_none(M.rsr(main, level=lv)) for lv in _levels(main)},
+            "rc": {s: _nan_none(M.rc(main, suite=s)) for s in suites} | {"all": _nan_none(M.rc(main))},
+            "task_rates": {f"{s}/{t}": _nan_none(v) for (s, t), v in M.task_rates(main).items()},
+            "rd": {},
+            "gripper": {g: _nan_none(M.rsr(main, gripper=g)) for g in ("open", "closed")},
+            "chunk_sweep": {str(c): _nan_none(M.rsr(base, chunk_size=c)) for c in ecfg.chunk_sizes},
+        }
+        for s in suites + [None]:
+            r = M.rd(main, ecfg.epsilon, **({} if s is None else {"suite": s}))
+            res["rd"][s or "all"] = {"rd": _nan_none(r.rd), "m_pre": _nan_none(r.m_pre),
+                                     "m_post": _nan_none(r.m_post), "n_pre": r.n_pre, "n_post": r.n_post,
+                                     "scenes": r.scenes}
+        out["policies"][pol] = res
+    return out
+
+
+def markdown(rows: list[dict], ecfg: EvalConfig, data: dict, header: str = "") -> str:
+    chunk = data["chunk_size"]
+    suites = _ordered({r["suite"] for r in rows}, SUITES)
+    parts = ["# Recovery evaluation\n\n", header, "\n",
+             f"Rates in %, trials in parentheses; — = no trials in that subset. Chunk size {chunk} unless noted; "
+             f"RD epsilon {ecfg.epsilon:g}; RC uses the population std of task rates.\n"]
+    for pol, res in data["policies"].items():
+        main = M.select(rows, policy=pol, chunk_size=chunk)
+        lvls = _levels(main)
+        head = ["suite"] + [lv or "unlabeled" for lv in lvls] + ["all"]
+        body = [[s] + [_cell(main, suite=s, level=lv) for lv in lvls] + [_cell(main, suite=s)] for s in suites]
+        body.append(["**all**"] + [_cell(main, level=lv) for lv in lvls] + [_cell(main)])
+        parts += [f"\n## Policy `{pol}`\n\n### RSR per suite × level\n\n", _table(head, body)]
+        rd_body = [[k, pct(v["m_pre"]), pct(v["m_post"]), "—" if v["rd"] is None else f"{v['rd']:.3f}",
+                    f"{v['scenes']} / {v['n_pre']} / {v['n_post']}"] for k, v in res["rd"].items()]
+        parts += ["\n### RD per suite\n\n", _table(["suite", "M_pre", "M_post", "RD", "scenes / pre / post reruns"], rd_body)]
+        rc_body = [[k, "—" if v is None else f"{v:.3f}"] for k, v in res["rc"].items()]
+        parts += ["\n### RC per suite\n\n", _table(["suite", "RC"], rc_body)]
+        g_body = [[s] + [_cell(main, suite=s, gripper=g) for g in ("open", "closed")] for s in suites]
+        g_body.append(["**all**"] + [_cell(main, gripper=g) for g in ("open", "closed")])
+        parts += ["\n### Gripper initialization: open vs closed\n\n", _table(["suite", "open", "closed"], g_body)]
+        if len(ecfg.chunk_sizes) > 1:
+            base = M.select(rows, policy=pol)
+            c_body = [[str(c), _cell(base, chunk_size=c)] for c in ecfg.chunk_sizes]
+            parts += ["\n### Chunk-size sweep\n\n", _table(["chunk size", "RSR"], c_body)]
+    return "".join(parts)
+
+
+def plots(data: dict, ecfg: EvalConfig, out: Path) -> list[str]:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    pols = list(data["policies"])
+    if not pols:
+        return []
+    written = []
+    fig, axes = plt.subplots(1, len(pols), figsize=(4.5 * len(pols), 3.2), squeeze=False)
+    for ax, pol in zip(axes[0], pols, strict=True):
+        grid = data["policies"][pol]["rsr_suite_level"]
+        suites, cols = list(grid), (list(next(iter(grid.values()))) if grid else [])
+        vals = np.array([[np.nan if grid[s][c] is None else 100 * grid[s][c] for c in cols] for s in suites])
+        ax.set_facecolor("#e6e6e6")  # undefined cells (no trials) show grey
+        ax.imshow(np.ma.masked_invalid(vals), vmin=0, vmax=100, cmap="viridis", aspect="auto")
+        ax.set_xticks(range(len(cols)), cols)
+        ax.set_yticks(range(len(suites)), suites)
+        for i in range(len(suites)):
+            for j in range(len(cols)):
+                v = vals[i, j]
+                ax.text(j, i, "—" if np.isnan(v) else f"{v:.0f}", ha="center", va="center",
+                        color="black" if np.isnan(v) or v > 60 else "white")
+        ax.set_title(f"RSR % — {pol}")
+    fig.tight_layout()
+    write_with(out / "rsr_heatmap.png", lambda p: fig.savefig(p, dpi=120))
+    plt.close(fig)
+    written.append("rsr_heatmap.png")
+
+    fig, ax = plt.subplots(figsize=(1.5 + 1.6 * len(pols), 3))
+    x = np.arange(len(pols))
+    for k, g in enumerate(("open", "closed")):
+        v = [data["policies"][p]["gripper"][g] for p in pols]
+        ax.bar(x + (k - 0.5) * 0.38, [np.nan if a is None else 100 * a for a in v], 0.38, label=g)
+    ax.set_xticks(x, pols)
+    ax.set_ylim(0, 100)
+    ax.set_ylabel("RSR %")
+    ax.legend(title="gripper")
+    fig.tight_layout()
+    write_with(out / "gripper.png", lambda p: fig.savefig(p, dpi=120))
+    plt.close(fig)
+    written.append("gripper.png")
+
+    if len(ecfg.chunk_sizes) > 1:
+        fig, ax = plt.subplots(figsize=(4.5, 3))
+        for pol in pols:
+            sweep = data["policies"][pol]["chunk_sweep"]
+            ax.plot(ecfg.chunk_sizes, [np.nan if sweep[str(c)] is None else 100 * sweep[str(c)]
+                                       for c in ecfg.chunk_sizes], marker="o", label=pol)
+        ax.set_xscale("log", base=2)
+        ax.set_xticks(ecfg.chunk_sizes, [str(c) for c in ecfg.chunk_sizes])
+        ax.set_ylim(0, 100)
+        ax.set_xlabel("chunk size")
+        ax.set_ylabel("RSR %")
+        ax.legend()
+        fig.tight_layout()
+        write_with(out / "chunk_sweep.png", lambda p: fig.savefig(p, dpi=120))
+        plt.close(fig)
+        written.append("chunk_sweep.png")
+    return written
+
+
+def write_report(rows: list[dict], ecfg: EvalConfig, out: str | Path, scenes_dir=None,
+                 problems: list[str] | None = None, planned: int | None = None) -> dict:
+    out = Path(out)
+    data = compute(rows, ecfg)
+    scene_rows = M.select(rows, mode="scene")
+    header = (f"Scenes: `{scenes_dir}` ({len({r['scene_id'] for r in scene_rows})} evaluated); "
+              f"trials recorded: {len(rows)}" + (f" of {planned} planned" if planned is not None else "") + ".\n")
+    if problems:
+        header += "\nProblems (skipped):\n\n" + "".join(f"- {p}\n" for p in problems)
+    figs = plots(data, ecfg, out)
+    md = markdown(rows, ecfg, data, header) + "".join(f"\n![{f}]({f})\n" for f in figs)
+    write_text(out / "report.md", md)
+    write_json(out / "metrics.json", data)
+    return data

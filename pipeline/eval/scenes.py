@@ -1,0 +1,103 @@
+"""Find the recovery scenes to evaluate.
+
+Inputs, either of:
+- a released scenario set: `scenarios.parquet` (`pipeline.release.manifest`) lists every
+  scene with its files (relative paths), level, category and source episode;
+- stage 2 output (`<run>/stage2/`) or any folder laid out like a release without a
+  manifest: `selected_bddl_scenes_<suite>/<task>/episode_<id>/step_<NNNN>.bddl` beside
+  `step_<NNNN>_sim_state.npy`; level and category are then unknown (None, reported as
+  "unlabeled").
+Output: `Scene`s sorted by (suite, task, episode, step), and a list of problems (a .bddl
+without its state, an unparsable name), each naming the file: those scenes are skipped.
+
+Invariant: `scene_id` = `<suite>/<task>/<episode_id>/step_<NNNN>` is stable across copies
+of a set, so it can seed per-scene randomness and key results.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from pipeline.sim import TaskSpec, get_task
+
+_SCENE_RE = re.compile(r"selected_bddl_scenes_(?P<suite>[^/]+)/(?P<task>[^/]+)/episode_(?P<ep>[^/]+)/step_(?P<step>\d+)\.bddl$")
+STATE_SUFFIX = "_sim_state.npy"
+
+
+@dataclass(frozen=True)
+class Scene:
+    suite: str
+    task: str
+    episode_id: str
+    step: int  # failure-onset step of the source episode (the scene's state)
+    bddl_path: Path
+    state_path: Path
+    level: str | None = None
+    category: str | None = None
+    instruction: str | None = None
+    init_state: int | None = None  # official init state the source episode started from
+    history_paths: tuple[Path, ...] = field(default_factory=tuple)
+
+    @property
+    def scene_id(self) -> str:
+        return f"{self.suite}/{self.task}/{self.episode_id}/step_{self.step:04d}"
+
+    @property
+    def source_key(self) -> str:
+        """The stage-1 episode key of the rollout this scene was cut from."""
+        return f"{self.suite}/{self.task}/{self.episode_id}"
+
+
+def _from_manifest(root: Path, manifest: Path) -> tuple[list[Scene], list[str]]:
+    from pipeline.release.manifest import read_manifest
+
+    scenes, problems = [], []
+    for r in read_manifest(manifest):
+        bddl, state = root / r.bddl_path, root / r.state_path
+        missing = [str(p) for p in (bddl, state) if not p.is_file()]
+        if missing:
+            problems.append(f"{manifest}: scene {r.suite}/{r.task}/{r.episode_id} step {r.step}: missing {missing}")
+            continue
+        scenes.append(Scene(r.suite, r.task, r.episode_id, r.step, bddl, state, r.level, r.category,
+                            r.instruction, r.init_state, tuple(root / h for h in r.history_paths)))
+    return scenes, problems
+
+
+def _from_layout(root: Path) -> tuple[list[Scene], list[str]]:
+    scenes, problems = [], []
+    for bddl in sorted(root.glob("selected_bddl_scenes_*/*/episode_*/step_*.bddl")):
+        m = _SCENE_RE.search(bddl.relative_to(root).as_posix())
+        if m is None:
+            problems.append(f"{bddl}: name does not follow step_<NNNN>.bddl")
+            continue
+        state = bddl.with_name(bddl.stem + STATE_SUFFIX)
+        if not state.is_file():
+            problems.append(f"{bddl}: no state file {state.name} beside it")
+            continue
+        history = tuple(sorted(p for p in bddl.parent.glob(f"{bddl.stem}_history*") if p.is_file()))
+        scenes.append(Scene(m["suite"], m["task"], m["ep"], int(m["step"]), bddl, state, history_paths=history))
+    return scenes, problems
+
+
+def find_scenes(root: str | Path) -> tuple[list[Scene], list[str]]:
+    """Scenes under `root` (a release with a manifest, or stage-2 style layout)."""
+    root = Path(root)
+    if not root.is_dir():
+        raise FileNotFoundError(f"{root}: no such scene folder")
+    manifest = root / "scenarios.parquet"
+    scenes, problems = _from_manifest(root, manifest) if manifest.is_file() else _from_layout(root)
+    scenes.sort(key=lambda s: (s.suite, s.task, s.episode_id, s.step))
+    return scenes, problems
+
+
+def scene_task(scene: Scene) -> TaskSpec:
+    """The registry task of a scene, with the scene's own BDDL file in place of LIBERO's.
+
+    A released scene is self-contained: its (normalized) BDDL is what the state vector was
+    saved against. `pipeline.sim.EnvCache` keys environments by BDDL content, so scenes of
+    one task share one environment per worker.
+    """
+    base = get_task(scene.suite, scene.task)
+    return base.model_copy(update={"bddl_path": scene.bddl_path})
