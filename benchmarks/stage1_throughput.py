@@ -1,0 +1,188 @@
+"""Stage 1 throughput, measured side by side in one run.
+
+    .venv/bin/python benchmarks/stage1_throughput.py [--episodes 4] [--horizon 160]
+
+Modes, on the same episodes (same task, init states, policy and seeds, same artifacts:
+states.npy, steps.parquet, agentview + wrist MP4 at --fps, frames.parquet):
+  floor       physics only: reset, settle, policy + env.step; nothing recorded or rendered
+  ours        our stage 1 episode (`run_one`): physics-only rollout, then videos
+              rendered from the logged states at --fps (render: all, and the stage's
+              default render: failures, which skips the videos of successes)
+  naive       LIBERO's usual loop: `OffScreenRenderEnv` renders both cameras at every step;
+              the frames at --fps go into the same videos
+These three run in this process on one prebuilt environment per mode (environment build
+excluded; one core). Then `stage1.run` itself with 1 and with 2 local workers (spawn,
+build, everything included), and with 2 workers without LP_NUM_THREADS=1, for the
+worker speed-up. Other processes on the machine skew the numbers; rerun when quiet.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import tempfile
+import time
+from pathlib import Path
+
+os.environ.setdefault("MUJOCO_GL", "egl")
+
+import numpy as np  # noqa: E402
+
+from pipeline.config import load_config  # noqa: E402
+from pipeline.rollout import run_episode  # noqa: E402
+from pipeline.sim import SimEnv  # noqa: E402
+from pipeline.sim.env import _quiet  # noqa: E402
+from pipeline.stage1.recorder import EpisodeRecorder  # noqa: E402
+from pipeline.stage1.units import plan_units  # noqa: E402
+from pipeline.stage1.video import frame_steps, write_videos  # noqa: E402
+from pipeline.stage1.worker import run_one  # noqa: E402
+
+
+class NaiveLiberoEnv(SimEnv):
+    """SimEnv's API over LIBERO's `OffScreenRenderEnv`, which renders every camera at every
+    step (the loop of LIBERO's and openpi's evaluation scripts). Benchmark baseline only."""
+
+    def __init__(self, task, cameras: list[str], size: int):
+        from pipeline.sim.libero_setup import ensure_libero_ready
+
+        ensure_libero_ready()
+        with _quiet():
+            from libero.libero.envs import OffScreenRenderEnv
+
+            self._wrapper = OffScreenRenderEnv(
+                bddl_file_name=str(task.bddl_path), camera_names=cameras, camera_heights=size,
+                camera_widths=size, control_freq=20, horizon=10**9, ignore_done=True,
+                hard_reset=False,  # LIBERO's default (True) would rebuild the model every reset: favour naive
+            )
+            self._wrapper.reset()
+        self.task, self.env, self._renderers = task, self._wrapper.env, {}
+        self._owner = self._body_owners()
+        self.cameras = cameras
+        self.last_obs: dict = {}
+
+    def step(self, action: np.ndarray) -> bool:
+        self.last_obs, _, done, _ = self.env.step(np.asarray(action, dtype=np.float64))
+        return bool(done)
+
+    def frames(self) -> dict[str, np.ndarray]:
+        return {c: self.last_obs[f"{c}_image"][::-1] for c in self.cameras}  # robosuite: upside down
+
+
+def floor_episode(env, policy, unit, cfg) -> None:
+    r = cfg.stage1.rollout
+    env.reset_to_init(unit.init_state)
+    env.settle(r.settle_steps)
+    policy.reset(env.task, unit.seed)
+    run_episode(env, policy, r.horizon, r.chunk_size, r.stop_on_success)
+
+
+def naive_episode(env: NaiveLiberoEnv, policy, unit, cfg, out: Path) -> None:
+    r, v = cfg.stage1.rollout, cfg.stage1.video
+    env.reset_to_init(unit.init_state)
+    env.settle(r.settle_steps)
+    policy.reset(env.task, unit.seed)
+    rec = EpisodeRecorder(env)
+    env.last_obs = env._wrapper.env._get_observations(force_update=True)  # renders the first frame
+    stride = 20 // v.fps
+    frames = {c: [] for c in env.cameras}
+    kept: list[int] = []
+
+    def keep(step: int) -> None:
+        kept.append(step)
+        for c, img in env.frames().items():
+            frames[c].append(img.copy())
+
+    keep(0)
+
+    def on_step(info) -> None:
+        rec.on_step(info)
+        if (info.step + 1) % stride == 0:
+            keep(info.step + 1)
+
+    res = run_episode(env, policy, r.horizon, r.chunk_size, r.stop_on_success, on_step=on_step)
+    if kept[-1] != res.steps:
+        keep(res.steps)
+    assert kept == frame_steps(res.steps, v.fps)
+    folder = out / unit.rel_dir
+    rec.write(folder)
+    write_videos(frames, kept, folder, v.fps)
+
+
+def timed(label: str, fn, units) -> float:
+    t0 = time.perf_counter()
+    for u in units:
+        fn(u)
+    dt = time.perf_counter() - t0
+    print(f"  {label:<28} {dt:8.1f} s  {len(units) / dt * 3600:8.0f} episodes/hour", flush=True)
+    return dt
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--config", default="configs/smoke.yaml", help="policy and noise come from here")
+    ap.add_argument("--suite", default="libero_spatial")
+    ap.add_argument("--task-index", type=int, default=0)
+    ap.add_argument("--episodes", type=int, default=4)
+    ap.add_argument("--horizon", type=int, default=160)
+    ap.add_argument("--fps", type=int, default=10)
+    ap.add_argument("--resolution", type=int, default=256)
+    ap.add_argument("--skip-workers", action="store_true", help="only the one-core comparison")
+    args = ap.parse_args()
+
+    from pipeline.policies.factory import make_policy
+    from pipeline.sim.registry import tasks as list_tasks
+    from pipeline.stage1.run import run
+
+    task = list_tasks([args.suite])[args.task_index]
+    tmp = Path(tempfile.mkdtemp(prefix="stage1-bench-"))
+    cfg = load_config(args.config, {
+        "run.output_dir": str(tmp / "inproc"), "tasks.suites": [args.suite], "tasks.tasks": [task.name],
+        "tasks.max_tasks_per_suite": None, "tasks.init_states": list(range(args.episodes)),
+        "stage1.rollout.horizon": args.horizon, "stage1.rollout.stop_on_success": False,
+        "stage1.video.cameras": ["agentview", "robot0_eye_in_hand"], "stage1.video.fps": args.fps,
+        "stage1.video.resolution": args.resolution, "stage1.video.render": "all",
+    })
+    units = plan_units(cfg)
+    print(f"{len(units)} episodes of {task.task_id}, horizon {args.horizon} (no early stop), "
+          f"2 cameras {args.resolution}px at {args.fps} fps, policy {cfg.stage1.policy.kind}; output {tmp}")
+
+    print("one core, in process (environment build excluded):")
+    env = SimEnv(task)
+    policy = make_policy(cfg.stage1.policy)
+    t_floor = timed("physics-only floor", lambda u: floor_episode(env, policy, u, cfg), units)
+    t_ours = timed("ours (render from states)", lambda u: run_one(env, policy, u, cfg, tmp / "ours"), units)
+    fail_cfg = cfg.model_copy(update={"stage1": cfg.stage1.model_copy(update={
+        "video": cfg.stage1.video.model_copy(update={"render": "failures"})})})
+    t_fail = timed("ours, default (failure videos)", lambda u: run_one(env, policy, u, fail_cfg, tmp / "fail"), units)
+    env.close()
+    naive_env = NaiveLiberoEnv(task, ["agentview", "robot0_eye_in_hand"], args.resolution)
+    t_naive = timed("naive LIBERO loop", lambda u: naive_episode(naive_env, policy, u, cfg, tmp / "naive"), units)
+    naive_env.close()
+    print(f"  ours / naive = {t_naive / t_ours:.2f}x (same artifacts; naive renders {20 // args.fps}x the frames, "
+          f"so this is bounded by ~{20 // args.fps}x); with the stage default (videos of failures only): "
+          f"{t_naive / t_fail:.2f}x; ours is {t_ours / t_floor:.2f}x the physics-only floor")
+
+    if args.skip_workers:
+        return
+    print("stage1.run end to end (spawn + build + episodes), local executor:")
+    import pipeline.stage1.run as run_mod
+    from rich.console import Console
+
+    quiet = Console(file=open(os.devnull, "w"))
+    walls = {}
+    for label, workers, env_vars in (("1 worker", 1, {"LP_NUM_THREADS": "1"}), ("2 workers", 2, {"LP_NUM_THREADS": "1"}),
+                                     ("2 workers, Mesa default", 2, {})):
+        run_mod.WORKER_ENV = env_vars
+        c = cfg.model_copy(update={
+            "run": cfg.run.model_copy(update={"output_dir": tmp / label.replace(" ", "_").replace(",", "")}),
+            "executor": cfg.executor.model_copy(update={"workers": workers})})
+        t0 = time.perf_counter()
+        run(c, console=quiet)
+        walls[label] = dt = time.perf_counter() - t0
+        print(f"  {label:<28} {dt:8.1f} s  {len(units) / dt * 3600:8.0f} episodes/hour", flush=True)
+    print(f"  speed-up 2 workers vs 1: {walls['1 worker'] / walls['2 workers']:.2f}x; "
+          f"LP_NUM_THREADS=1 vs Mesa default with 2 workers: {walls['2 workers, Mesa default'] / walls['2 workers']:.2f}x")
+
+
+if __name__ == "__main__":
+    main()

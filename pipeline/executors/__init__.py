@@ -1,0 +1,24 @@
+"""Where work runs is configuration: a local process pool (default) or Ray.
+
+Stage code hands an executor a function and a list of picklable work items; the function
+gets `(item, emit)` and may `emit(event)` small picklable events (progress) that reach the
+caller's `on_event` in the main process. Only `ray.py` imports ray, inside its methods.
+"""
+
+from __future__ import annotations
+
+from pipeline.config import ExecutorConfig
+from pipeline.executors.base import Executor
+
+
+def make_executor(cfg: ExecutorConfig, worker_env: dict[str, str] | None = None) -> Executor:
+    if cfg.kind == "ray":
+        from pipeline.executors.ray import RayExecutor
+
+        return RayExecutor(cfg.workers, cfg.ray_address, worker_env=worker_env)
+    from pipeline.executors.local import LocalExecutor
+
+    return LocalExecutor(cfg.workers, worker_env=worker_env)
+
+
+__all__ = ["Executor", "make_executor"]

@@ -1,0 +1,23 @@
+"""Build the configured policy: `make_policy(PolicyConfig) -> Policy`.
+
+Imports each policy kind lazily, so a state-only run never loads the openpi client and an
+openpi run never loads the scripted planner.
+"""
+
+from __future__ import annotations
+
+from pipeline.config import PolicyConfig
+from pipeline.errors import ConfigError
+from pipeline.policies.base import Policy
+
+
+def make_policy(cfg: PolicyConfig) -> Policy:
+    if cfg.kind == "scripted":
+        from pipeline.policies.scripted import make_scripted_policy
+
+        return make_scripted_policy(cfg.scripted, name=cfg.name)
+    if cfg.kind == "openpi":
+        from pipeline.policies.openpi_policy import OpenpiPolicy
+
+        return OpenpiPolicy(cfg.openpi, name=cfg.name)
+    raise ConfigError(f"policy.kind: unknown policy kind {cfg.kind!r}")

@@ -1,0 +1,79 @@
+"""The stage 1 manifest and its summary table.
+
+Inputs: the done markers under `stage1/_done/` (each holds one EpisodeRecord as JSON).
+Outputs: `stage1/episodes.parquet` (EPISODE_SCHEMA, sorted by episode key, rebuilt from
+the markers so it is complete after any crash and rerun), a rich summary table, and
+`stage1/summary.json`.
+
+Invariants: one manifest row per done marker of a planned unit; no key twice.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pyarrow.parquet as pq
+from rich.table import Table
+
+from pipeline.atomic import Completions, write_json, write_with
+from pipeline.records import EpisodeRecord, episodes_table
+
+
+def collect_records(stage1_dir: Path, unit_ids: list[str] | None = None) -> list[EpisodeRecord]:
+    """EpisodeRecords of the done units (of `unit_ids`, or all), sorted by key."""
+    done = Completions(stage1_dir)
+    ids = sorted(done.done_ids() if unit_ids is None else set(unit_ids) & done.done_ids())
+    records = [EpisodeRecord.model_validate(json.loads((done.dir / f"{u}.done").read_text())) for u in ids]
+    records.sort(key=lambda r: r.key)
+    keys = [r.key for r in records]
+    if len(set(keys)) != len(keys):
+        raise RuntimeError(f"{stage1_dir}: duplicate episode keys among done markers")
+    return records
+
+
+def write_manifest(stage1_dir: Path, records: list[EpisodeRecord]) -> Path:
+    path = Path(stage1_dir) / "episodes.parquet"
+    table = episodes_table(records)
+    write_with(path, lambda p: pq.write_table(table, p))
+    return path
+
+
+def summarize(records: list[EpisodeRecord]) -> list[dict]:
+    """Per suite/task: episodes, successes, failures, mean steps; plus an 'all' row."""
+    groups: dict[tuple[str, str], list[EpisodeRecord]] = {}
+    for r in records:
+        groups.setdefault((r.suite, r.task), []).append(r)
+    groups[("all", "")] = list(records)
+    rows = []
+    for (suite, task), rs in groups.items():
+        n = len(rs)
+        ok = sum(r.success for r in rs)
+        rows.append(
+            {
+                "suite": suite,
+                "task": task,
+                "episodes": n,
+                "successes": ok,
+                "failures": n - ok,
+                "mean_steps": round(sum(r.steps for r in rs) / n, 1) if n else 0.0,
+            }
+        )
+    return rows
+
+
+def summary_table(rows: list[dict]) -> Table:
+    table = Table(title="stage 1 summary")
+    for col in ("suite", "task", "episodes", "successes", "failures", "mean steps"):
+        table.add_column(col, justify="left" if col in ("suite", "task") else "right", overflow="fold")
+    for r in rows:
+        style = "bold" if r["suite"] == "all" else None
+        table.add_row(
+            r["suite"], r["task"], str(r["episodes"]), str(r["successes"]), str(r["failures"]), f"{r['mean_steps']:.1f}",
+            style=style,
+        )
+    return table
+
+
+def write_summary(stage1_dir: Path, rows: list[dict], extra: dict) -> None:
+    write_json(Path(stage1_dir) / "summary.json", {"tasks": rows, **extra})
