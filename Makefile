@@ -9,7 +9,7 @@ CONFIG ?= configs/smoke.yaml
 # real-simulator tests run in parallel, one worker per core
 PYTEST_WORKERS ?= 2
 
-.PHONY: setup setup-test demo test stage1 stage2 stage3 review-status review-serve release verify reproduce eval tasks bench clean
+.PHONY: setup setup-test demo test stage1 stage2 stage3 review-status review-serve review-export bench-review release verify reproduce export-lerobot eval tasks bench clean
 
 # setup is idempotent: the stamp re-runs it only when its inputs change
 $(VENV)/.setup-stamp: pyproject.toml requirements/sim.txt scripts/setup.sh
@@ -46,6 +46,13 @@ review-status: setup
 review-serve: setup
 	$(RECOVER) review serve --config $(CONFIG)
 
+review-export: setup
+	$(RECOVER) review export --config $(CONFIG)
+
+# p95 latency of the review page and decision POST with 20 concurrent reviewers; lost decisions
+bench-review: setup
+	$(PY) benchmarks/review_load.py
+
 release: setup
 	$(RECOVER) release --config $(CONFIG)
 
@@ -54,6 +61,9 @@ verify: setup
 
 reproduce: setup
 	$(RECOVER) reproduce --config $(CONFIG)
+
+export-lerobot: setup
+	$(RECOVER) export-lerobot --config $(CONFIG)
 
 eval: setup
 	$(RECOVER) eval --config $(CONFIG)

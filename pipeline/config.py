@@ -103,7 +103,7 @@ class PolicyConfig(_Strict):
 
 class VideoConfig(_Strict):
     cameras: list[Literal["agentview", "robot0_eye_in_hand"]] = Field(default_factory=lambda: ["agentview"])
-    fps: int = Field(default=10)
+    fps: int = Field(default=4)
     resolution: int = Field(default=256, ge=32, le=1024)
     # render which episodes: failures only (all later stages need) or all of them
     render: Literal["failures", "all", "none"] = "failures"

@@ -1,0 +1,181 @@
+"""Load on the review server: p95 latency of the item page and of the decision POST with
+20 concurrent reviewers on loopback (aim <= 100 ms), and the count of lost decisions (must be 0).
+
+Runs the real server (`recover review serve`, its own process, SQLite in WAL mode) on a
+synthetic run folder (`pipeline.review.sample_run`), then reviewer threads that each loop
+  POST /api/queue/next -> item page (GET item, frames, evidence) -> POST decision
+until the queue is empty. One reviewer first, then N at once, printed side by side.
+A decision is lost when the server acknowledged it (200) but the database lacks it.
+
+    .venv/bin/python benchmarks/review_load.py [--reviewers 20] [--items 300] [--k 2] [--think-s 0]
+Results: printed, and written to benchmarks/results/review_load.json.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import httpx
+import yaml
+from sqlalchemy import func, select
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+from pipeline.review.auth import add_user  # noqa: E402
+from pipeline.review.db import Item, Review, User, make_engine, read_session, write_session  # noqa: E402
+from pipeline.review.enqueue import enqueue  # noqa: E402
+from pipeline.review.sample_run import build  # noqa: E402
+from pipeline.review.server import free_port  # noqa: E402
+from pipeline.stage3.inputs import collect, context  # noqa: E402
+from pipeline.stage3.run import proposal_for  # noqa: E402
+from pipeline.records import Category, Characterization, Level  # noqa: E402
+
+
+def fill(run: Path, engine, n_items: int, k: int, tag: str) -> None:
+    """n_items queue items sharing the sample run's media (distinct episode keys)."""
+    units = [u for u in collect(run) if u.localization is not None]
+    with write_session(engine) as s:
+        for i in range(n_items):
+            u = units[i % len(units)]
+            ch = Characterization(key=u.key, recovery_level=Level.L3, failure_category=Category.object_displacement,
+                                  recovery_action="Set the bowl upright", source="simstate")
+            enqueue(s, key=f"{u.key}-{tag}{i:05d}", instruction=u.localization.instruction, proposal=proposal_for(u, ch, None),
+                    context=context(run, u, 20, 10.0), required_reviews=k)
+
+
+def p(values: list[float], q: float) -> float:
+    if not values:
+        return float("nan")
+    values = sorted(values)
+    return values[min(len(values) - 1, int(round(q / 100 * (len(values) - 1))))] * 1000
+
+
+def load(url: str, tokens: list[str], think_s: float = 0.0) -> dict:
+    page_s: list[float] = []
+    item_s: list[float] = []
+    post_s: list[float] = []
+    acked: list[tuple[int, str, dict]] = []
+    errors: list[str] = []
+    lock = threading.Lock()
+    start = threading.Barrier(len(tokens))
+
+    def reviewer(token: str, idx: int) -> None:
+        with httpx.Client(base_url=url, headers={"Authorization": f"Bearer {token}"}, timeout=30) as c:
+            start.wait()
+            while True:
+                nxt = c.post("/api/queue/next").json()["item"]
+                if nxt is None:
+                    return
+                t0 = time.perf_counter()
+                r = c.get(f"/api/items/{nxt}")
+                t1 = time.perf_counter()
+                c.get(f"/api/items/{nxt}/frames")
+                c.get(f"/api/items/{nxt}/evidence")
+                t2 = time.perf_counter()
+                if think_s:  # a person watching the video before deciding
+                    time.sleep(think_s)
+                body = {"decision": "revise", "version": r.json()["version"], "idempotency_key": f"{idx}-{nxt}",
+                        "fields": {"recovery_level": f"L{1 + (idx + nxt) % 4}"}}
+                t3 = time.perf_counter()
+                d = c.post(f"/api/items/{nxt}/review", json=body)
+                t4 = time.perf_counter()
+                with lock:
+                    item_s.append(t1 - t0)
+                    page_s.append(t2 - t0)
+                    post_s.append(t4 - t3)
+                    if d.status_code == 200:
+                        acked.append((nxt, f"r{idx}", d.json()["values"]))
+                    else:
+                        errors.append(f"{d.status_code} {d.text[:120]}")
+
+    t = time.perf_counter()
+    threads = [threading.Thread(target=reviewer, args=(tok, i)) for i, tok in enumerate(tokens)]
+    for th in threads:
+        th.start()
+    for th in threads:
+        th.join()
+    wall = time.perf_counter() - t
+    return {"reviewers": len(tokens), "decisions": len(acked), "refused": len(errors), "errors": errors[:5],
+            "wall_s": round(wall, 2), "decisions_per_s": round(len(acked) / wall, 1),
+            "item_json_p50_ms": round(p(item_s, 50), 1), "item_json_p95_ms": round(p(item_s, 95), 1),
+            "item_page_p50_ms": round(p(page_s, 50), 1), "item_page_p95_ms": round(p(page_s, 95), 1),
+            "decision_p50_ms": round(p(post_s, 50), 1), "decision_p95_ms": round(p(post_s, 95), 1),
+            "_acked": acked}
+
+
+def check(engine, acked: list[tuple[int, str, dict]], k: int) -> dict:
+    with read_session(engine) as s:
+        rows = s.execute(select(Review.item_id, User.name, Review.values).join(User, User.id == Review.reviewer_id)).all()
+        over = s.scalar(select(func.count(Item.id)).where(Item.n_reviews > k))
+    stored = {(i, n): v for i, n, v in rows}
+    lost = sum(1 for i, n, v in acked if stored.get((i, n)) != v)
+    return {"lost_decisions": lost, "stored": len(stored), "items_over_k": over}
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--reviewers", type=int, default=20)
+    ap.add_argument("--items", type=int, default=300, help="items for the N-reviewer run")
+    ap.add_argument("--k", type=int, default=2)
+    ap.add_argument("--think-s", type=float, default=0.0,
+                    help="pause between loading an item and deciding (0 = a stress test: nobody watches)")
+    args = ap.parse_args()
+    tmp = Path(tempfile.mkdtemp(prefix="review_load_"))
+    run = tmp / "run"
+    build(run, n_episodes=4, n_quarantined=0, steps=200)
+    cfg = tmp / "load.yaml"
+    cfg.write_text(yaml.safe_dump({"run": {"output_dir": str(run)}, "stage3": {"reviews_per_item": args.k}}))
+    engine = make_engine(f"sqlite:///{run / 'stage3' / 'review.sqlite'}")
+    tokens = [add_user(engine, f"r{i}", "reviewer") for i in range(args.reviewers)]
+    port = free_port()
+    server = subprocess.Popen([str(REPO / ".venv" / "bin" / "recover"), "review", "serve", "--config", str(cfg),
+                               "--port", str(port)], cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                              env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    url = f"http://127.0.0.1:{port}"
+    try:
+        for _ in range(200):
+            try:
+                httpx.get(url + "/", timeout=1)
+                break
+            except httpx.HTTPError:
+                time.sleep(0.1)
+        results = []
+        for n, items in ((1, max(20, args.items // 10)), (args.reviewers, args.items)):
+            # a one-reviewer queue holds items with K = 1 so that single person can empty it
+            fill(run, engine, items, args.k if n > 1 else 1, tag=f"n{n}-")
+            res = load(url, tokens[:n], args.think_s)
+            res.update(check(engine, res.pop("_acked"), args.k))
+            results.append(res)
+    finally:
+        server.terminate()
+        server.wait(timeout=10)
+    one, many = results
+    cols = ["reviewers", "decisions", "decisions_per_s", "item_json_p95_ms", "item_page_p50_ms", "item_page_p95_ms",
+            "decision_p50_ms", "decision_p95_ms", "refused", "lost_decisions", "items_over_k"]
+    print(f"{'metric':<20}{'1 reviewer':>14}{f'{args.reviewers} reviewers':>16}{'ratio':>9}")
+    for c in cols:
+        a, b = one[c], many[c]
+        ratio = f"{b / a:.2f}x" if isinstance(a, (int, float)) and a else ""
+        print(f"{c:<20}{a:>14}{b:>16}{ratio:>9}")
+    verdict = "OK" if many["item_page_p95_ms"] <= 100 and many["decision_p95_ms"] <= 100 else "ABOVE the 100 ms aim"
+    print(f"think time {args.think_s} s per item; p95 with {args.reviewers} reviewers: item page {many['item_page_p95_ms']} ms, decision "
+          f"{many['decision_p95_ms']} ms -> {verdict}; lost decisions: {many['lost_decisions'] + one['lost_decisions']}")
+    out = REPO / "benchmarks" / "results" / f"review_load{f'_think{args.think_s:g}s' if args.think_s else ''}.json"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    load_avg = [round(x, 2) for x in os.getloadavg()]
+    print(f"machine: {os.cpu_count()} cores, load average {load_avg} (other work on the machine slows every request)")
+    out.write_text(json.dumps({"one": one, "many": many, "cpu_count": os.cpu_count(), "load_avg": load_avg}, indent=2))
+    return 0 if many["lost_decisions"] == 0 and one["lost_decisions"] == 0 and many["items_over_k"] == 0 else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,110 @@
+"""The adjudicating half of the state machine: conflict -> adjudicating -> final.
+
+Inputs: a write session, an adjudicator (role checked by the caller), the item.
+Invariants:
+- the adjudicator is never one of the item's reviewers (403);
+- only the disputed fields are decided: a missing disputed field or an extra field is a
+  422 naming it; a rationale is required;
+- the decision carries the item's version; an outdated one is a 409; a claim by another
+  adjudicator holds the item until it expires;
+- one adjudication per item (unique in the database), after which the item is final and
+  immutable; the same decision again (same idempotency key) is answered, not repeated.
+- `exclude` ends an item as final without values (not a usable failure); export skips it.
+"""
+
+from __future__ import annotations
+
+from sqlalchemy import select
+from sqlalchemy.orm import Session
+
+from pipeline.records import step_at_time
+from pipeline.review import audit
+from pipeline.review.db import ADJUDICATING, CONFLICT, FINAL, Adjudication, Item, Review, User, now
+from pipeline.review.errors import Forbidden, Invalid, Stale
+from pipeline.review.fields import FieldError, validate_field
+from pipeline.review.workflow import QueueSettings, get_item
+
+CLAIM_SECONDS = 1800
+
+
+def _check_not_reviewer(s: Session, user: User, item: Item) -> None:
+    if s.scalar(select(Review.id).where(Review.item_id == item.id, Review.reviewer_id == user.id)):
+        raise Forbidden(f"you reviewed item {item.id}; another adjudicator must decide it")
+
+
+def _check_claimable(user: User, item: Item, t: float) -> None:
+    if item.status == ADJUDICATING and item.adjudicator_id != user.id and (item.adjudication_lease_until or 0) > t:
+        raise Stale(f"item {item.id} is being adjudicated by someone else", current={"version": item.version})
+    if item.status not in (CONFLICT, ADJUDICATING):
+        raise Stale(f"item {item.id} is {item.status}, not in conflict", current={"status": item.status})
+
+
+def claim(s: Session, user: User, item_id: int) -> Item:
+    item = get_item(s, item_id)
+    _check_not_reviewer(s, user, item)
+    t = now()
+    _check_claimable(user, item, t)
+    if item.status != ADJUDICATING or item.adjudicator_id != user.id:
+        audit.record(s, user.name, "claimed", item, {"status": item.status}, {"status": ADJUDICATING})
+        item.status, item.adjudicator_id = ADJUDICATING, user.id
+        item.version += 1
+    item.adjudication_lease_until = t + CLAIM_SECONDS
+    return item
+
+
+def adjudicate(s: Session, user: User, item_id: int, body: dict, cfg: QueueSettings) -> tuple[Adjudication, bool]:
+    """Decide the disputed fields; return (the adjudication, whether it was a harmless repeat)."""
+    item = get_item(s, item_id)
+    key = str(body.get("idempotency_key") or "")
+    if not key:
+        raise Invalid("idempotency_key: required (any unique string per decision)", field="idempotency_key")
+    done = s.scalar(select(Adjudication).where(Adjudication.item_id == item.id))
+    if done is not None and done.idempotency_key == key:
+        return done, True
+    _check_not_reviewer(s, user, item)
+    if item.status == FINAL:
+        raise Stale(f"item {item.id} is final and cannot be edited; a new revision goes through the queue",
+                    current={"status": item.status})
+    _check_claimable(user, item, now())
+    if int(body.get("version") or 0) != item.version:
+        raise Stale(f"item {item.id} changed since you loaded it (version {item.version})",
+                    current={"version": item.version})
+    rationale = (body.get("rationale") or "").strip()
+    if not rationale:
+        raise Invalid("rationale: an adjudication needs a rationale", field="rationale")
+    exclude = bool(body.get("exclude"))
+    values = _validated(item, body.get("fields") or {}, exclude, cfg)
+    adj = Adjudication(item_id=item.id, adjudicator_id=user.id, values=values, exclude=exclude,
+                       rationale=rationale, idempotency_key=key)
+    s.add(adj)
+    before = {"status": item.status, "agreed": item.agreed, "disputed": item.disputed}
+    if exclude:
+        item.final, item.resolution = None, "excluded"
+    else:
+        final = {**(item.agreed or {}), **values}
+        final["fail_step"] = step_at_time(final["fail_time_s"], (item.context or {}).get("control_hz", cfg.control_hz))
+        item.final, item.resolution = final, "adjudicated"
+    item.status, item.adjudicator_id, item.adjudication_lease_until = FINAL, user.id, None
+    item.finalized_at, item.version = now(), item.version + 1
+    s.flush()
+    audit.record(s, user.name, "adjudicated", item, before,
+                 {"status": FINAL, "final": item.final, "resolution": item.resolution, "values": values},
+                 detail=rationale)
+    return adj, False
+
+
+def _validated(item: Item, fields: dict, exclude: bool, cfg: QueueSettings) -> dict:
+    disputed = list(item.disputed or [])
+    extra = [f for f in fields if f not in disputed]
+    if extra:
+        raise Invalid(f"{extra[0]}: not disputed; only {disputed} are adjudicated", field=extra[0])
+    if exclude:
+        return {}
+    missing = [f for f in disputed if f not in fields]
+    if missing:
+        raise Invalid(f"{missing[0]}: disputed; the adjudication must decide it", field=missing[0])
+    duration = (item.context or {}).get("duration_s")
+    try:
+        return {f: validate_field(f, fields[f], duration) for f in disputed}
+    except FieldError as e:
+        raise Invalid(str(e), field=e.field) from None

@@ -1,0 +1,231 @@
+"""The review server: JSON API, the web page (`review_ui/`) and the run's media.
+
+Inputs: the run folder, a database engine, the queue settings.
+Outputs: a FastAPI app. Routes (all JSON unless noted):
+  POST /api/login {token} -> session cookie + csrf      POST /api/logout     GET /api/me
+  GET  /api/queue            POST /api/queue/next       POST /api/items/{id}/lease
+  GET  /api/items/{id}       POST /api/items/{id}/review (accept | revise | flag)
+  GET  /api/items/{id}/evidence, /frames                GET  /api/items/{id}/history
+  GET  /api/items/{id}/adjudication   POST .../claim    POST .../adjudication
+  GET  /api/status           GET /media/<path under the run folder> (file)   GET / (the page)
+Invariants: every route but login and the page needs a user; writes through the cookie
+need the CSRF header; errors are `{"detail", "field"?, "current"?}` with 401/403/404/409/422;
+a request body that fails the schema is a 422 whose `field` names the bad field.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Literal
+
+from fastapi import Depends, FastAPI, Request
+from fastapi.exceptions import RequestValidationError
+from fastapi.responses import FileResponse, JSONResponse, Response
+from fastapi.staticfiles import StaticFiles
+from pydantic import BaseModel, ConfigDict, Field
+from sqlalchemy import select
+from sqlalchemy.engine import Engine
+
+from pipeline.records import Category, Level
+from pipeline.review import adjudication, audit, auth, media, views, workflow
+from pipeline.review.db import Review, read_session, write_session
+from pipeline.review.errors import Forbidden, NotFound, ReviewError
+from pipeline.review.workflow import QueueSettings
+
+UI_DIR = Path(__file__).resolve().parents[2] / "review_ui"
+
+
+class FieldsIn(BaseModel):
+    """Edited fields; only the ones given count as edits."""
+
+    model_config = ConfigDict(extra="forbid")
+    fail_time_s: float | None = Field(default=None, ge=0)
+    recovery_level: Level | None = None
+    failure_category: Category | None = None
+    recovery_action: str | None = Field(default=None, min_length=1, max_length=200)
+
+
+class DecisionIn(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    decision: Literal["accept", "revise", "flag"]
+    fields: FieldsIn | None = None
+    reason: str | None = Field(default=None, max_length=2000)
+    version: int = Field(default=0, ge=0)
+    idempotency_key: str = Field(min_length=1, max_length=100)
+
+
+class AdjudicationIn(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+    fields: FieldsIn = FieldsIn()
+    rationale: str = Field(default="", max_length=4000)
+    exclude: bool = False
+    version: int = Field(ge=0)
+    idempotency_key: str = Field(min_length=1, max_length=100)
+
+
+class LoginIn(BaseModel):
+    token: str = Field(min_length=1, max_length=200)
+
+
+def _edits(f: FieldsIn | None) -> dict:
+    return {} if f is None else f.model_dump(mode="json", exclude_unset=True)
+
+
+def _validation_error(_req: Request, exc: RequestValidationError) -> JSONResponse:
+    errors = []
+    for e in exc.errors():
+        loc = [str(p) for p in e["loc"] if p not in ("body",)]
+        field = next((p for p in reversed(loc) if not p.isdigit()), "body")
+        got = f" (got {e['input']!r})" if "input" in e and not isinstance(e["input"], dict) else ""
+        errors.append({"field": field, "path": ".".join(loc), "msg": f"{field}: {e['msg']}{got}"})
+    first = errors[0] if errors else {"field": "body", "msg": "invalid request"}
+    return JSONResponse(status_code=422, content={"detail": first["msg"], "field": first["field"], "errors": errors})
+
+
+def create_app(run_dir: str | Path, engine: Engine, settings: QueueSettings, ui_dir: Path = UI_DIR) -> FastAPI:
+    run_dir = Path(run_dir).resolve()
+    app = FastAPI(title="libero-recover review", docs_url="/api/docs", openapi_url="/api/openapi.json")
+    app.add_exception_handler(RequestValidationError, _validation_error)
+    app.add_exception_handler(ReviewError, lambda _r, e: JSONResponse(status_code=e.status, content=e.body()))
+
+    @app.middleware("http")
+    async def security_headers(request: Request, call_next):
+        resp = await call_next(request)
+        resp.headers.setdefault("X-Content-Type-Options", "nosniff")
+        resp.headers.setdefault("Referrer-Policy", "same-origin")
+        resp.headers.setdefault("Content-Security-Policy", "default-src 'self'; img-src 'self' data:; "
+                                "style-src 'self' 'unsafe-inline'; frame-ancestors 'none'; form-action 'self'")
+        return resp
+
+    def who(request: Request) -> auth.Principal:
+        header = request.headers.get("authorization", "")
+        bearer = header[7:].strip() if header.lower().startswith("bearer ") else None
+        return auth.authenticate(engine, request.method, bearer, request.cookies.get(auth.COOKIE),
+                                 request.headers.get(auth.CSRF_HEADER))
+
+    def adjudicator(p: auth.Principal = Depends(who)) -> auth.Principal:
+        auth.require_role(p.user, "adjudicator")
+        return p
+
+    @app.post("/api/login")
+    def login(body: LoginIn, request: Request):
+        # JSON only: a cross-site form cannot send it without a CORS preflight (login CSRF)
+        if not request.headers.get("content-type", "").startswith("application/json"):
+            return JSONResponse(status_code=415, content={"detail": "send JSON"})
+        user, sid, csrf = auth.sign_in(engine, body.token)
+        resp = JSONResponse({"user": user.name, "role": user.role, "csrf": csrf})
+        resp.set_cookie(auth.COOKIE, sid, max_age=auth.SESSION_SECONDS, httponly=True, samesite="strict",
+                        secure=request.url.scheme == "https", path="/")
+        return resp
+
+    @app.post("/api/logout")
+    def logout(request: Request, _p: auth.Principal = Depends(who)):
+        if request.cookies.get(auth.COOKIE):
+            auth.sign_out(engine, request.cookies[auth.COOKIE])
+        resp = JSONResponse({"ok": True})
+        resp.delete_cookie(auth.COOKIE, path="/")
+        return resp
+
+    @app.get("/api/me")
+    def me(p: auth.Principal = Depends(who)):
+        return {"user": p.user.name, "role": p.user.role, "csrf": p.csrf,
+                "settings": {"required_reviews": settings.required_reviews,
+                             "time_tolerance_s": settings.time_tolerance_s}}
+
+    @app.get("/api/queue")
+    def queue(p: auth.Principal = Depends(who)):
+        with read_session(engine) as s:
+            return JSONResponse(views.queue(s, p.user, auth.rank(p.user.role) >= auth.rank("adjudicator")))
+
+    @app.post("/api/queue/next")
+    def next_item(p: auth.Principal = Depends(who)):
+        with write_session(engine) as s:
+            item = workflow.lease_next(s, p.user, settings)
+            return {"item": item.id if item is not None else None}
+
+    @app.post("/api/items/{item_id}/lease")
+    def lease(item_id: int, p: auth.Principal = Depends(who)):
+        with write_session(engine) as s:
+            lease = workflow.lease_item(s, p.user, workflow.get_item(s, item_id), settings)
+            return {"item": item_id, "expires_at": audit.iso(lease.expires_at)}
+
+    @app.get("/api/items/{item_id}")
+    def item(item_id: int, p: auth.Principal = Depends(who)):
+        with read_session(engine) as s:
+            # JSONResponse directly: views are plain JSON already (skips FastAPI's re-encoding)
+            return JSONResponse(views.reviewer_view(s, workflow.get_item(s, item_id), p.user))
+
+    def _table(item_id: int, kind: str) -> Response:
+        with read_session(engine) as s:
+            ctx = workflow.get_item(s, item_id).context or {}
+        path = media.safe_path(run_dir, ctx.get(kind) or "")
+        if path is None:
+            raise NotFound(f"item {item_id} has no {kind} table")
+        body = media.evidence_json(path) if kind == "evidence" else media.frames_json(path)
+        return Response(body, media_type="application/json", headers={"Cache-Control": "private, max-age=300"})
+
+    @app.get("/api/items/{item_id}/evidence")
+    def evidence(item_id: int, _p: auth.Principal = Depends(who)):
+        return _table(item_id, "evidence")
+
+    @app.get("/api/items/{item_id}/frames")
+    def frames(item_id: int, _p: auth.Principal = Depends(who)):
+        return _table(item_id, "frames")
+
+    @app.post("/api/items/{item_id}/review")
+    def review(item_id: int, body: DecisionIn, p: auth.Principal = Depends(who)):
+        payload = {**body.model_dump(mode="json", exclude={"fields"}), "fields": _edits(body.fields)}
+        with write_session(engine) as s:
+            r, replayed = workflow.submit_review(s, p.user, item_id, payload, settings)
+            item = workflow.get_item(s, item_id)
+            return {"replayed": replayed, "version": r.version, "decision": r.decision, "values": r.values,
+                    "state": "open" if item.status in ("pending", "leased", "reviewed") else "closed"}
+
+    def _not_reviewer(s, p: auth.Principal, item_id: int):
+        item = workflow.get_item(s, item_id)
+        if s.scalar(select(Review.id).where(Review.item_id == item_id, Review.reviewer_id == p.user.id)):
+            raise Forbidden(f"you reviewed item {item_id}; its other decisions stay hidden from you")
+        return item
+
+    @app.get("/api/items/{item_id}/adjudication")
+    def adjudication_page(item_id: int, p: auth.Principal = Depends(adjudicator)):
+        with read_session(engine) as s:
+            return JSONResponse(views.adjudication_view(s, _not_reviewer(s, p, item_id)))
+
+    @app.post("/api/items/{item_id}/claim")
+    def claim(item_id: int, p: auth.Principal = Depends(adjudicator)):
+        with write_session(engine) as s:
+            item = adjudication.claim(s, p.user, item_id)
+            return {"item": item_id, "version": item.version, "status": item.status}
+
+    @app.post("/api/items/{item_id}/adjudication")
+    def adjudicate(item_id: int, body: AdjudicationIn, p: auth.Principal = Depends(adjudicator)):
+        payload = {**body.model_dump(mode="json", exclude={"fields"}), "fields": _edits(body.fields)}
+        with write_session(engine) as s:
+            adj, replayed = adjudication.adjudicate(s, p.user, item_id, payload, settings)
+            item = workflow.get_item(s, item_id)
+            return {"replayed": replayed, "status": item.status, "final": item.final, "resolution": item.resolution}
+
+    @app.get("/api/items/{item_id}/history")
+    def history(item_id: int, p: auth.Principal = Depends(adjudicator)):
+        with read_session(engine) as s:
+            if auth.rank(p.user.role) < auth.rank("admin"):
+                _not_reviewer(s, p, item_id)
+            return {"item": item_id, "events": audit.history(s, item_id)}
+
+    @app.get("/api/status")
+    def status(_p: auth.Principal = Depends(adjudicator)):
+        from pipeline.review import report
+
+        with read_session(engine) as s:
+            return {"counts": views.counts(s), **report.summary(s, settings.time_tolerance_s)}
+
+    @app.get("/media/{rel:path}")
+    def media_file(rel: str, _p: auth.Principal = Depends(who)):
+        path = media.safe_path(run_dir, rel)
+        if path is None:
+            raise NotFound("no such file")
+        return FileResponse(path, headers={"Cache-Control": "private, max-age=3600"})
+
+    app.mount("/", StaticFiles(directory=ui_dir, html=True), name="ui")
+    return app

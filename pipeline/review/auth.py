@@ -1,0 +1,123 @@
+"""People and their rights: personal tokens, roles, web sessions, CSRF.
+
+Inputs: a personal token (printed once by `recover review add-reviewer`), or a session
+cookie set by signing in with it.
+Outputs: the acting `User`, or 401/403.
+Invariants:
+- only SHA-256 hashes of tokens and session ids are stored (tokens are 256-bit random, so
+  a plain hash suffices; a stolen database yields no usable token);
+- roles are ordered reviewer < adjudicator < admin (an adjudicator may also review);
+- a write authenticated by the session cookie must carry the session's CSRF token in
+  `X-CSRF-Token`; a write with `Authorization: Bearer <token>` needs none (browsers never
+  attach that header on their own, so it cannot be forged cross-site);
+- the session cookie is HttpOnly and SameSite=Strict.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import hmac
+import secrets
+from dataclasses import dataclass
+
+from sqlalchemy import delete, select
+from sqlalchemy.engine import Engine
+from sqlalchemy.orm import Session
+
+from pipeline.review import audit
+from pipeline.review.db import User, WebSession, now, read_session, write_session
+from pipeline.review.errors import Forbidden, ReviewError
+
+ROLES = ("reviewer", "adjudicator", "admin")
+COOKIE = "rv_session"
+CSRF_HEADER = "x-csrf-token"
+SESSION_SECONDS = 12 * 3600
+SAFE_METHODS = {"GET", "HEAD", "OPTIONS"}
+
+
+class Unauthorized(ReviewError):
+    status = 401
+
+
+def hash_token(token: str) -> str:
+    return hashlib.sha256(token.encode()).hexdigest()
+
+
+def rank(role: str) -> int:
+    return ROLES.index(role)
+
+
+def require_role(user: User, role: str) -> None:
+    if rank(user.role) < rank(role):
+        raise Forbidden(f"{user.name} is a {user.role}; this needs the {role} role")
+
+
+def add_user(engine: Engine, name: str, role: str, actor: str = "admin") -> str:
+    """Create a user (or give an existing one a new token and role); return the new token."""
+    if role not in ROLES:
+        raise ValueError(f"role must be one of {list(ROLES)}, got {role!r}")
+    if not name or len(name) > 64:
+        raise ValueError("name must be 1-64 characters")
+    token = secrets.token_urlsafe(32)
+    with write_session(engine) as s:
+        user = s.scalar(select(User).where(User.name == name))
+        if user is None:
+            user = User(name=name, role=role, token_hash=hash_token(token))
+            s.add(user)
+            audit.record(s, actor, "user_added", None, None, {"name": name, "role": role})
+        else:
+            before = {"name": name, "role": user.role}
+            user.role, user.token_hash, user.active = role, hash_token(token), True
+            s.execute(delete(WebSession).where(WebSession.user_id == user.id))
+            audit.record(s, actor, "user_token_rotated", None, before, {"name": name, "role": role})
+    return token
+
+
+def user_by_token(s: Session, token: str) -> User | None:
+    user = s.scalar(select(User).where(User.token_hash == hash_token(token)))
+    return user if user is not None and user.active else None
+
+
+def sign_in(engine: Engine, token: str) -> tuple[User, str, str]:
+    """Exchange a personal token for (user, session id for the cookie, CSRF token)."""
+    with write_session(engine) as s:
+        user = user_by_token(s, token or "")
+        if user is None:
+            raise Unauthorized("unknown or disabled token")
+        sid, csrf = secrets.token_urlsafe(32), secrets.token_urlsafe(32)
+        t = now()
+        s.execute(delete(WebSession).where(WebSession.expires_at <= t))
+        s.add(WebSession(id_hash=hash_token(sid), user_id=user.id, csrf=csrf, expires_at=t + SESSION_SECONDS))
+        return user, sid, csrf
+
+
+def sign_out(engine: Engine, sid: str) -> None:
+    with write_session(engine) as s:
+        s.execute(delete(WebSession).where(WebSession.id_hash == hash_token(sid)))
+
+
+@dataclass
+class Principal:
+    user: User
+    csrf: str | None  # None when authenticated by bearer token
+
+
+def authenticate(engine: Engine, method: str, bearer: str | None, cookie: str | None, csrf: str | None) -> Principal:
+    """The acting user of a request; raises 401 (who are you) or 403 (CSRF)."""
+    with read_session(engine) as s:
+        if bearer:
+            user = user_by_token(s, bearer)
+            if user is None:
+                raise Unauthorized("unknown or disabled token")
+            return Principal(user, None)
+        if not cookie:
+            raise Unauthorized("sign in first")
+        row = s.get(WebSession, hash_token(cookie))
+        if row is None or row.expires_at <= now():
+            raise Unauthorized("session expired; sign in again")
+        user = s.get(User, row.user_id)
+        if user is None or not user.active:
+            raise Unauthorized("account disabled")
+        if method not in SAFE_METHODS and not (csrf and hmac.compare_digest(csrf, row.csrf)):
+            raise Forbidden("missing or wrong CSRF token (X-CSRF-Token)")
+        return Principal(user, row.csrf)

@@ -1,0 +1,138 @@
+"""`recover review ...`: serve the review page, queue status, people, export, history.
+
+Every command reads the run config (`--config`), so the database and run folder are the
+ones stage 3 filled. Heavy imports (SQLAlchemy, FastAPI, matplotlib) happen inside the
+commands: importing this module stays cheap for `recover --help`.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import typer
+
+app = typer.Typer(add_completion=False, no_args_is_help=True, help="Human review queue.")
+CONFIG = typer.Option(Path("configs/smoke.yaml"), "--config", "-c", help="run config (YAML)")
+
+
+def _cfg(path: Path):
+    from rich.console import Console
+
+    from pipeline.config import load_config
+    from pipeline.errors import ConfigError
+
+    try:
+        return load_config(path)
+    except ConfigError as e:
+        Console(stderr=True).print(f"[red]config error[/red] {e}")
+        raise typer.Exit(2) from None
+
+
+@app.command()
+def serve(config: Path = CONFIG, host: str = typer.Option(None, help="default: stage3.host"),
+          port: int = typer.Option(None, help="default: stage3.port")) -> None:
+    """Serve the review web page and API."""
+    import uvicorn
+
+    from pipeline.review.server import build_app
+
+    cfg = _cfg(config)
+    host, port = host or cfg.stage3.host, port or cfg.stage3.port
+    typer.echo(f"review page: http://{host}:{port}/  (run folder {cfg.out})")
+    uvicorn.run(build_app(cfg), host=host, port=port, log_level="info")
+
+
+@app.command("add-reviewer")
+def add_reviewer(name: str = typer.Argument(..., help="a person's name (unique)"),
+                 role: str = typer.Option("reviewer", help="reviewer | adjudicator | admin"),
+                 config: Path = CONFIG) -> None:
+    """Create a person (or give them a new token); prints their personal token once."""
+    from pipeline.review.auth import ROLES, add_user
+    from pipeline.review.server import engine_for
+
+    if role not in ROLES:
+        typer.echo(f"role must be one of {', '.join(ROLES)}", err=True)
+        raise typer.Exit(2)
+    token = add_user(engine_for(_cfg(config)), name, role, actor="cli")
+    typer.echo(f"{name} ({role}) token: {token}")
+    typer.echo("Keep it secret: only its hash is stored; run add-reviewer again to replace it.")
+
+
+@app.command()
+def status(config: Path = CONFIG, as_json: bool = typer.Option(False, "--json", help="print JSON")) -> None:
+    """Queue counts and agreement statistics; writes the confusion-matrix PNG beside them."""
+    from pipeline.atomic import write_json
+    from pipeline.review import report, views
+    from pipeline.review.db import read_session, write_session
+    from pipeline.review.server import engine_for, settings
+    from pipeline.review.workflow import expire
+
+    cfg = _cfg(config)
+    engine = engine_for(cfg)
+    with write_session(engine) as s:
+        expire(s)
+    with read_session(engine) as s:
+        out = {"counts": views.counts(s), **report.summary(s, settings(cfg).time_tolerance_s)}
+    folder = Path(cfg.out) / "stage3"
+    write_json(folder / "review_status.json", out)
+    png = report.plot(out, folder / "review_confusion.png")
+    if as_json:
+        typer.echo(json.dumps(out, indent=2))
+    else:
+        from pipeline.review.status_view import render
+
+        render(out)
+    typer.echo(f"wrote {folder / 'review_status.json'} and {png}")
+
+
+@app.command()
+def export(config: Path = CONFIG, out: Path = typer.Option(None, help="default: <run>/stage3/annotations")) -> None:
+    """Write final records as JSON per episode plus annotations.parquet."""
+    from pipeline.review.db import read_session
+    from pipeline.review.export import export as do_export
+    from pipeline.review.server import engine_for
+
+    cfg = _cfg(config)
+    root = out or Path(cfg.out) / "stage3" / "annotations"
+    with read_session(engine_for(cfg)) as s:
+        files = do_export(s, root)
+    typer.echo(f"exported {len(files)} final record(s) to {root}")
+
+
+@app.command()
+def schema(out: Path = typer.Option(Path("annotations/schema.json"), help="where to write it")) -> None:
+    """Write the JSON schema of exported annotation files (from `records.Annotation`)."""
+    from pipeline.review.export import write_schema
+
+    typer.echo(f"wrote {write_schema(out)}")
+
+
+@app.command()
+def history(item: str = typer.Argument(..., help="item id or episode key <suite>/<task>/<episode_id>"),
+            config: Path = CONFIG) -> None:
+    """Every audit event of an item (all revisions of an episode key), oldest first."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from pipeline.review.audit import history as get_history
+    from pipeline.review.db import read_session
+    from pipeline.review.server import engine_for
+
+    with read_session(engine_for(_cfg(config))) as s:
+        events = get_history(s, item)
+    if not events:
+        typer.echo(f"no events for {item}", err=True)
+        raise typer.Exit(1)
+    table = Table(title=f"history of {item}")
+    for col in ("at", "actor", "kind", "item", "before", "after", "model / prompt", "detail"):
+        table.add_column(col, overflow="fold")
+    for e in events:
+        model = " / ".join(x for x in (e["model"], e["prompt_name"]) if x)
+        table.add_row(e["at"], e["actor"], e["kind"], str(e["item_id"]), _short(e["before"]), _short(e["after"]),
+                      model, e["detail"])
+    Console(width=200).print(table)
+
+
+def _short(d) -> str:
+    return "" if d is None else json.dumps(d, ensure_ascii=False)[:300]

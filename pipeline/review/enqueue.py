@@ -1,0 +1,67 @@
+"""Putting an episode's proposal into the review queue, and revisions.
+
+Inputs: an episode key, the model's proposal (values + model/prompt version; values may
+be missing for quarantined outputs), the review context (media paths, phases, events).
+Outputs: an `items` row (status pending) and an `enqueued` or `revision` audit event.
+Invariants: enqueueing the same proposal again changes nothing (stage 3 may be rerun
+after a crash); a different proposal for a key becomes a new revision: a final item
+stays final and untouched, an unfinished one is superseded (taken out of the queue).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+
+from sqlalchemy import delete, select
+from sqlalchemy.orm import Session
+
+from pipeline.review import audit
+from pipeline.review.db import FINAL, PENDING, SUPERSEDED, Item, Lease
+
+
+def proposal_hash(proposal: dict, quarantined: bool, reason: str | None) -> str:
+    blob = json.dumps({"p": proposal, "q": quarantined, "r": reason}, sort_keys=True, default=str)
+    return hashlib.sha256(blob.encode()).hexdigest()
+
+
+def enqueue(
+    s: Session,
+    *,
+    key: str,
+    instruction: str,
+    proposal: dict,
+    context: dict,
+    required_reviews: int,
+    quarantined: bool = False,
+    reason: str | None = None,
+    detail: str | None = None,
+    actor: str = "stage3",
+) -> tuple[Item, bool]:
+    """Return (the item for this proposal, whether a new item was created)."""
+    suite, task, ep = key.split("/", 2)
+    h = proposal_hash(proposal, quarantined, reason)
+    latest = s.scalar(select(Item).where(Item.key == key).order_by(Item.revision.desc()).limit(1))
+    if latest is not None and latest.proposal_hash == h:
+        return latest, False
+    item = Item(
+        key=key, revision=(latest.revision + 1) if latest else 1, suite=suite, task=task, episode_id=ep,
+        instruction=instruction, status=PENDING, version=1, required_reviews=required_reviews, n_reviews=0,
+        quarantined=quarantined, quarantine_reason=reason, quarantine_detail=detail,
+        proposal=proposal, proposal_hash=h, context=context,
+    )
+    s.add(item)
+    s.flush()
+    if latest is None:
+        audit.record(s, actor, "enqueued", item, None, {"status": PENDING, "proposal": proposal})
+        return item, True
+    if latest.status != FINAL:  # a final item is never written again
+        latest.superseded_by = item.id
+        # reviews of an outdated proposal are kept (history) but the item leaves the queue
+        s.execute(delete(Lease).where(Lease.item_id == latest.id))
+        audit.record(s, actor, "status", latest, {"status": latest.status}, {"status": SUPERSEDED})
+        latest.status = SUPERSEDED
+        latest.version += 1
+    audit.record(s, actor, "revision", item, {"revision": latest.revision, "proposal": latest.proposal},
+                 {"revision": item.revision, "proposal": proposal})
+    return item, True

@@ -1,0 +1,102 @@
+"""Files a reviewer may see: videos, the frame table and simulator evidence of one run.
+
+Inputs: the run folder and a path relative to it (as stored in an item's context).
+Outputs: a resolved path inside the run folder, or None; evidence and frame tables as
+JSON-ready columns.
+Invariants: nothing outside the run folder is ever served, whatever the request says
+(`..`, absolute paths, symlinks pointing out, NUL bytes): `safe_path` returns None and the
+API answers 404. Tables are cached by (path, mtime, size), so a rewritten file is reread.
+"""
+
+from __future__ import annotations
+
+import os
+from functools import lru_cache
+from pathlib import Path
+
+ALLOWED_SUFFIXES = {".mp4", ".webm", ".parquet", ".png", ".jpg", ".json"}
+
+
+def safe_path(run_dir: Path, rel: str) -> Path | None:
+    if not rel or "\x00" in rel or rel.startswith(("/", "\\")) or "\\" in rel:
+        return None
+    root = run_dir.resolve()
+    try:
+        target = (root / rel).resolve(strict=True)
+    except (OSError, RuntimeError):
+        return None
+    if not target.is_relative_to(root) or not target.is_file() or target.suffix.lower() not in ALLOWED_SUFFIXES:
+        return None
+    return target
+
+
+_EVIDENCE_COLUMNS = ("step", "time_s", "gripper_opening", "grasped", "contacts", "displacement", "goal_progress")
+
+
+def _stamp(path: Path) -> tuple[str, int, int]:
+    st = os.stat(path)
+    return str(path), st.st_mtime_ns, st.st_size
+
+
+def evidence(path: Path) -> dict:
+    """The EVIDENCE_SCHEMA table as columns; displacement becomes one series per object."""
+    return _evidence(*_stamp(path))
+
+
+def evidence_json(path: Path) -> bytes:
+    """`evidence` encoded once (encoding thousands of floats per request costs more than reading)."""
+    return _encoded("evidence", *_stamp(path))
+
+
+def frames_json(path: Path) -> bytes:
+    return _encoded("frames", *_stamp(path))
+
+
+@lru_cache(maxsize=256)
+def _encoded(kind: str, path: str, mtime: int, size: int) -> bytes:
+    import json
+
+    table = _evidence(path, mtime, size) if kind == "evidence" else _frames(path, mtime, size)
+    return json.dumps(table, separators=(",", ":")).encode()
+
+
+@lru_cache(maxsize=256)
+def _evidence(path: str, _mtime: int, _size: int) -> dict:
+    import json
+
+    import pyarrow.parquet as pq
+
+    table = pq.read_table(path, columns=list(_EVIDENCE_COLUMNS))
+    meta = json.loads((table.schema.metadata or {}).get(b"evidence", b"{}"))
+    t = table.to_pydict()
+    objects = sorted({k for row in t["displacement"] for k, _ in (row or [])})
+    disp = {o: [] for o in objects}
+    for row in t["displacement"]:
+        d = dict(row or [])
+        for o in objects:
+            v = d.get(o)
+            disp[o].append(None if v is None else round(float(v), 4))
+    return {
+        "step": t["step"],
+        "time_s": [round(x, 4) for x in t["time_s"]],
+        "gripper_opening": [round(float(x), 4) for x in t["gripper_opening"]],
+        "grasped": t["grasped"],
+        "contacts": t["contacts"],
+        "goal_progress": [round(float(x), 4) for x in t["goal_progress"]],
+        "displacement": disp,
+        "targets": meta.get("targets", []),
+        "references": meta.get("references", []),
+    }
+
+
+def frames(path: Path) -> dict:
+    """The FRAME_SCHEMA table as columns (frame i shows the state at `time_s[i]`)."""
+    return _frames(*_stamp(path))
+
+
+@lru_cache(maxsize=256)
+def _frames(path: str, _mtime: int, _size: int) -> dict:
+    import pyarrow.parquet as pq
+
+    t = pq.read_table(path, columns=["frame", "step", "time_s"]).to_pydict()
+    return {"frame": t["frame"], "step": t["step"], "time_s": [round(x, 4) for x in t["time_s"]]}

@@ -1,0 +1,48 @@
+"""Printing `recover review status`: queue counts, agreement, model quality (rich tables).
+
+Inputs: the dict from `report.summary` plus `counts`. Output: text on the console.
+"""
+
+from __future__ import annotations
+
+from rich.console import Console
+from rich.table import Table
+
+
+def _f(x) -> str:
+    return "—" if x is None else f"{x:.3f}"
+
+
+def render(out: dict, console: Console | None = None) -> None:
+    console = console or Console()
+    counts = out["counts"]
+    t = Table(title=f"review queue: {counts['total']} items ({counts['quarantined']} quarantined)")
+    t.add_column("status")
+    t.add_column("items", justify="right")
+    for status in ("pending", "leased", "reviewed", "conflict", "adjudicating", "final", "superseded"):
+        if counts["by_status"].get(status):
+            t.add_row(status, str(counts["by_status"][status]))
+    console.print(t)
+
+    ag = out["agreement"]
+    t = Table(title=f"reviewer agreement ({ag['items']} items with 2+ reviews)")
+    for col in ("field", "kappa", "Krippendorff alpha", "agreement"):
+        t.add_column(col)
+    for field in ("recovery_level", "failure_category"):
+        a = ag[field]
+        t.add_row(field, f"{_f(a['kappa'])} ({a['kappa_kind'] or '—'})", f"{_f(a['alpha'])} ({a['alpha_metric']})",
+                  _f(a["percent_agreement"]))
+    ft = ag["fail_time_s"]
+    t.add_row("fail_time_s", "—", f"{_f(ft['alpha_interval'])} (interval)", f"{_f(ft['within_tau'])} within ±{ft['tau_s']} s")
+    t.add_row("recovery_action", "—", "—", _f(ag["recovery_action"]["percent_agreement"]))
+    console.print(t)
+
+    mq = out["model_vs_final"]
+    t = Table(title="model vs final")
+    for col in ("proposal by", "n", "level acc.", "category acc.", "time MAE s", "time within τ"):
+        t.add_column(col)
+    for g in mq["by_characterizer"]:
+        t.add_row(g["version"], str(g["n"]), _f(g["level"]["accuracy"]), _f(g["category"]["accuracy"]), "", "")
+    for g in mq["by_localizer"]:
+        t.add_row(g["version"] + " (times)", str(g["n"]), "", "", _f(g["mean_abs_error_s"]), _f(g["within_tau"]))
+    console.print(t)

@@ -1,0 +1,223 @@
+"""The reviewing half of the state machine: leases, decisions, and closing an item.
+
+pending -> leased -> reviewed (k of K) -> agreed (-> final) | conflict
+Inputs: a write session, the acting user, the item, the decision body.
+Invariants:
+- never more than K reviews: the review count rises by a conditional UPDATE
+  (`n_reviews < required_reviews`), and the (item, reviewer) unique constraint backs it;
+- leases are advisory and expire; an expired lease holds nothing;
+- a decision carries the version of the reviewer's own review it replaces (0 = none):
+  anything else is stale (409); the same decision again (same idempotency key, or the
+  same content) is answered with the stored review and changes nothing;
+- once K reviews exist the item leaves the queue: final when every field agrees,
+  otherwise conflict with the disputed fields named (see `fields.agreement`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from sqlalchemy import and_, delete, exists, func, select, update
+from sqlalchemy.orm import Session
+
+from pipeline.review import audit
+from pipeline.review.db import COLLECTING, CONFLICT, FINAL, LEASED, PENDING, REVIEWED, Item, Lease, Review, User, now
+from pipeline.review.errors import Invalid, NotFound, Stale
+from pipeline.review.fields import FieldError, agreement, resolve
+
+DECISIONS = ("accept", "revise", "flag")
+
+
+@dataclass(frozen=True)
+class QueueSettings:
+    required_reviews: int = 2
+    time_tolerance_s: float = 0.5
+    lease_seconds: int = 900
+    control_hz: int = 20
+
+
+def get_item(s: Session, item_id: int) -> Item:
+    item = s.get(Item, item_id)
+    if item is None:
+        raise NotFound(f"no item {item_id}")
+    return item
+
+
+def _active_leases(s: Session, item_id: int, t: float, exclude_user: int | None = None) -> int:
+    q = select(func.count(Lease.id)).where(Lease.item_id == item_id, Lease.expires_at > t)
+    if exclude_user is not None:
+        q = q.where(Lease.user_id != exclude_user)
+    return s.scalar(q) or 0
+
+
+def refresh_status(s: Session, item: Item, t: float | None = None) -> None:
+    """Recompute the status of an item that is still collecting reviews."""
+    if item.status not in COLLECTING:
+        return
+    t = now() if t is None else t
+    item.status = REVIEWED if item.n_reviews else (LEASED if _active_leases(s, item.id, t) else PENDING)
+
+
+def expire(s: Session, t: float | None = None) -> int:
+    """Drop expired leases and adjudication claims; return how many were dropped."""
+    t = now() if t is None else t
+    ids = s.scalars(select(Lease.item_id).where(Lease.expires_at <= t)).all()
+    if ids:
+        s.execute(delete(Lease).where(Lease.expires_at <= t))
+        for item in s.scalars(select(Item).where(Item.id.in_(set(ids)))):
+            refresh_status(s, item, t)
+    claims = s.scalars(select(Item).where(Item.status == "adjudicating", Item.adjudication_lease_until <= t)).all()
+    for item in claims:
+        item.status, item.adjudicator_id, item.adjudication_lease_until = CONFLICT, None, None
+        item.version += 1
+    return len(ids) + len(claims)
+
+
+def _reviewed_by(user_id: int):
+    return exists().where(and_(Review.item_id == Item.id, Review.reviewer_id == user_id))
+
+
+def lease_item(s: Session, user: User, item: Item, cfg: QueueSettings) -> Lease:
+    """Hold `item` for `user` for the lease time (renewing a lease they hold)."""
+    t = now()
+    if item.status not in COLLECTING:
+        raise Stale(f"item {item.id} is {item.status}, not open for review", current={"status": item.status})
+    if s.scalar(select(Review.id).where(Review.item_id == item.id, Review.reviewer_id == user.id)):
+        raise Stale(f"you already reviewed item {item.id}")
+    lease = s.scalar(select(Lease).where(Lease.item_id == item.id, Lease.user_id == user.id))
+    if lease is None:
+        if item.n_reviews + _active_leases(s, item.id, t, exclude_user=user.id) >= item.required_reviews:
+            raise Stale(f"item {item.id} already has {item.required_reviews} reviewers")
+        lease = Lease(item_id=item.id, user_id=user.id, expires_at=t + cfg.lease_seconds)
+        s.add(lease)
+        audit.record(s, user.name, "leased", item)
+    lease.expires_at = t + cfg.lease_seconds
+    s.flush()
+    refresh_status(s, item, t)
+    return lease
+
+
+_last_sweep: dict[str, float] = {}  # database URL -> time of the last sweep
+SWEEP_EVERY_S = 5.0
+
+
+def lease_next(s: Session, user: User, cfg: QueueSettings) -> Item | None:
+    """The user's next item: one they already hold, else the fullest open item with room."""
+    t = now()
+    # every query below already ignores expired leases; the sweep only tidies rows and
+    # statuses, so it need not run on every request
+    bind = s.get_bind().url.render_as_string(hide_password=True)
+    if t - _last_sweep.get(bind, 0.0) >= SWEEP_EVERY_S:
+        expire(s, t)
+        _last_sweep[bind] = t
+    held = s.scalar(
+        select(Item).join(Lease, Lease.item_id == Item.id)
+        .where(Lease.user_id == user.id, Lease.expires_at > t, Item.status.in_(COLLECTING), ~_reviewed_by(user.id))
+        .order_by(Item.id).limit(1)
+    )
+    if held is not None:
+        lease_item(s, user, held, cfg)
+        return held
+    leases = select(func.count(Lease.id)).where(Lease.item_id == Item.id, Lease.expires_at > t).scalar_subquery()
+    item = s.scalar(
+        select(Item)
+        .where(Item.status.in_(COLLECTING), Item.n_reviews + leases < Item.required_reviews, ~_reviewed_by(user.id))
+        .order_by(Item.quarantined, Item.n_reviews.desc(), Item.id).limit(1)
+    )
+    if item is not None:
+        lease_item(s, user, item, cfg)
+    return item
+
+
+def _values_for(item: Item, decision: str, fields: dict | None, reason: str | None, cfg: QueueSettings) -> dict | None:
+    if decision not in DECISIONS:
+        raise Invalid(f"decision: must be one of {list(DECISIONS)}, got {decision!r}", field="decision")
+    if decision == "flag":
+        if not (reason or "").strip():
+            raise Invalid("reason: a flag needs a reason", field="reason")
+        return None
+    if decision == "revise" and not fields:
+        raise Invalid("fields: a revision must change at least one field", field="fields")
+    edits = fields if decision == "revise" else {}
+    ctx = item.context or {}
+    try:
+        return resolve(item.proposal, edits, ctx.get("duration_s"), ctx.get("control_hz", cfg.control_hz))
+    except FieldError as e:
+        raise Invalid(str(e), field=e.field) from None
+
+
+def _same(r: Review, decision: str, values: dict | None, reason: str | None) -> bool:
+    return r.decision == decision and r.values == values and (r.flag_reason or None) == ((reason or "").strip() or None)
+
+
+def submit_review(s: Session, user: User, item_id: int, body: dict, cfg: QueueSettings) -> tuple[Review, bool]:
+    """Store a decision; return (the review, whether it was a harmless repeat)."""
+    item = get_item(s, item_id)
+    decision, key = body.get("decision"), str(body.get("idempotency_key") or "")
+    if not key:
+        raise Invalid("idempotency_key: required (any unique string per decision)", field="idempotency_key")
+    mine = s.scalar(select(Review).where(Review.item_id == item.id, Review.reviewer_id == user.id))
+    if mine is not None and mine.idempotency_key == key:
+        return mine, True
+    values = _values_for(item, decision, body.get("fields"), body.get("reason"), cfg)
+    reason = ((body.get("reason") or "").strip() or None) if decision == "flag" else None
+    if mine is not None and _same(mine, decision, values, reason):
+        return mine, True
+    seen = int(body.get("version") or 0)
+    current = mine.version if mine is not None else 0
+    if seen != current:
+        raise Stale(f"your review of item {item.id} changed since you loaded it (version {current}, you sent {seen})",
+                    current={"version": current})
+    if item.status not in COLLECTING:
+        raise Stale(f"item {item.id} is {item.status}; it no longer takes reviews", current={"status": item.status})
+    edited = sorted((body.get("fields") or {}).keys()) if decision == "revise" else []
+    before = _review_dict(mine) if mine is not None else None
+    if mine is None:
+        t = now()
+        held = s.scalar(select(Lease.id).where(Lease.item_id == item.id, Lease.user_id == user.id, Lease.expires_at > t))
+        if held is None and item.n_reviews + _active_leases(s, item.id, t, exclude_user=user.id) >= item.required_reviews:
+            # leases are honoured: without one, a reviewer may not take a place others hold
+            raise Stale(f"item {item.id} is held by other reviewers; take the next item instead")
+        took = s.execute(
+            update(Item).where(Item.id == item.id, Item.n_reviews < Item.required_reviews, Item.status.in_(COLLECTING))
+            .values(n_reviews=Item.n_reviews + 1, version=Item.version + 1)
+        ).rowcount
+        if not took:
+            raise Stale(f"item {item.id} already has its {item.required_reviews} reviews")
+        s.refresh(item)
+        mine = Review(item_id=item.id, reviewer_id=user.id, decision=decision, values=values, edited=edited,
+                      flag_reason=reason, idempotency_key=key, version=1)
+        s.add(mine)
+    else:
+        mine.decision, mine.values, mine.edited, mine.flag_reason = decision, values, edited, reason
+        mine.idempotency_key, mine.version, mine.updated_at = key, mine.version + 1, now()
+        item.version += 1
+    s.execute(delete(Lease).where(Lease.item_id == item.id, Lease.user_id == user.id))
+    s.flush()
+    audit.record(s, user.name, "review" if before is None else "review_changed", item, before, _review_dict(mine))
+    if item.n_reviews >= item.required_reviews:
+        close(s, item, cfg, actor=user.name)
+    else:
+        refresh_status(s, item)
+    return mine, False
+
+
+def close(s: Session, item: Item, cfg: QueueSettings, actor: str) -> None:
+    """All K reviews are in: final when every field agrees, else conflict on the disputed ones."""
+    reviews = s.scalars(select(Review).where(Review.item_id == item.id).order_by(Review.id)).all()
+    hz = (item.context or {}).get("control_hz", cfg.control_hz)
+    agreed, disputed = agreement([r.values for r in reviews], cfg.time_tolerance_s, hz)
+    before = item.status
+    item.agreed, item.disputed = agreed, disputed
+    if disputed:
+        item.status = CONFLICT
+    else:
+        item.status, item.final, item.resolution, item.finalized_at = FINAL, agreed, "agreed", now()
+    item.version += 1
+    audit.record(s, actor, "status", item, {"status": before},
+                 {"status": item.status, "disputed": disputed, "agreed": agreed})
+
+
+def _review_dict(r: Review) -> dict:
+    return {"decision": r.decision, "values": r.values, "edited": r.edited, "reason": r.flag_reason,
+            "version": r.version}

@@ -1,0 +1,149 @@
+"""Stage 3: characterize every localized failure and fill the human review queue.
+
+Inputs: stage-2 localizations and quarantine entries (see `inputs`), stage-1 media.
+Outputs (run folder):
+  stage3/characterizations/<suite>/<task>/<episode_id>.json   records.Characterization
+  stage3/quarantine/<suite>/<task>/<episode_id>.json          records.QuarantineEntry (stage3)
+  stage3/review.sqlite (or `stage3.db_url`)                   one queue item per episode
+  stage3/_done/<suite>__<task>__<episode_id>__<characterizer>.done   written last, per episode
+  stage3/summary.json, stage3/config.resolved.yaml
+Invariants: every stage-2 outcome enters the queue: a quarantined stage-2 output, or a
+characterization that failed, becomes an item marked quarantined (people supply the
+values); rerunning skips finished episodes, and enqueueing is idempotent, so a crash
+between the queue write and the done-marker loses and duplicates nothing. Done-markers name
+the characterizer (backend, model, prompt version): a new one characterizes again, and a
+changed proposal enters the queue as a new revision (final records stay untouched).
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from pathlib import Path
+
+from rich.console import Console
+from rich.progress import Progress
+
+from pipeline.atomic import Completions, write_json
+from pipeline.config import Config, save_resolved
+from pipeline.records import Characterization, QuarantineEntry
+from pipeline.review.db import write_session
+from pipeline.review.enqueue import enqueue
+from pipeline.review.server import engine_for
+from pipeline.stage3.characterizers import make_characterizer
+from pipeline.stage3.inputs import Unit, collect, context
+
+BATCH = 16
+
+
+def proposal_for(unit: Unit, ch: Characterization | None, q: QuarantineEntry | None) -> dict:
+    loc = unit.localization
+    localizer = ({"source": loc.source, "model": loc.model, "prompt_name": loc.prompt_name,
+                  "prompt_hash": loc.prompt_hash} if loc else
+                 {"source": q.source, "model": q.model, "prompt_name": q.prompt_name, "prompt_hash": q.prompt_hash})
+    char = ({"source": ch.source, "model": ch.model, "prompt_name": ch.prompt_name, "prompt_hash": ch.prompt_hash}
+            if ch else ({"source": q.source, "model": q.model, "prompt_name": q.prompt_name,
+                         "prompt_hash": q.prompt_hash} if q and q.stage == "stage3" else {}))
+    return {
+        "fail_time_s": loc.fail_time_s if loc else None,
+        "fail_step": loc.fail_step if loc else None,
+        "recovery_level": ch.recovery_level.value if ch else None,
+        "failure_category": ch.failure_category.value if ch else None,
+        "recovery_action": ch.recovery_action if ch else None,
+        "localizer": localizer,
+        "characterizer": char,
+        # the version shown beside the suggestion and written to the audit log
+        "source": (ch.source if ch else char.get("source")) or localizer.get("source"),
+        "model": (ch.model if ch else char.get("model")) or localizer.get("model"),
+        "prompt_name": (ch.prompt_name if ch else char.get("prompt_name")) or localizer.get("prompt_name"),
+        "prompt_hash": (ch.prompt_hash if ch else char.get("prompt_hash")) or localizer.get("prompt_hash"),
+    }
+
+
+def run(cfg: Config) -> dict:
+    run_dir = Path(cfg.out)
+    s3 = run_dir / "stage3"
+    save_resolved(cfg, s3)
+    units = collect(run_dir)
+    done = Completions(s3)
+    sig = _signature(cfg)
+    todo = [u for u in units if not done.is_done(f"{u.unit_id}__{sig}")]
+    engine = engine_for(cfg)
+    counts: Counter = Counter(skipped=len(units) - len(todo))
+    console = Console()
+    if not units:
+        console.print(f"[yellow]stage 3: nothing to do[/yellow]: no stage-2 outputs under {run_dir / 'stage2'}")
+    characterize = make_characterizer(cfg) if any(u.localization for u in todo) else None
+    hz, fps = cfg.stage1.rollout.control_hz, float(cfg.stage1.video.fps)
+    try:
+        with Progress(console=console, transient=False) as bar:
+            task = bar.add_task(f"stage 3: characterize + enqueue ({characterize.name if characterize else '-'})",
+                                total=len(todo))
+            for start in range(0, len(todo), BATCH):
+                batch = todo[start:start + BATCH]
+                locs = [u.localization for u in batch if u.localization is not None]
+                outcomes = iter(characterize(locs) if locs else [])
+                for unit in batch:
+                    outcome = next(outcomes) if unit.localization is not None else unit.quarantine
+                    counts[_store(run_dir, cfg, engine, unit, outcome, hz, fps)] += 1
+                    done.mark_done(f"{unit.unit_id}__{sig}", {"key": unit.key, "characterizer": _describe(cfg)})
+                    bar.advance(task)
+    finally:
+        if characterize is not None and hasattr(characterize, "close"):
+            characterize.close()
+    summary = {"episodes": len(units), **counts}
+    write_json(s3 / "summary.json", summary)
+    console.print(f"stage 3: {summary}")
+    return summary
+
+
+def _describe(cfg: Config) -> str:
+    v = cfg.stage3.vlm
+    if v.backend == "simstate":
+        return "simstate"
+    model = v.openai.model if v.backend == "openai" else str(v.transformers.model_path)
+    return f"{v.backend}:{model}:{v.prompt_version}:{v.language}"
+
+
+def _signature(cfg: Config) -> str:
+    """Short id of the characterizer: changing model or prompt re-characterizes every episode
+    (an unchanged proposal is a no-op in the queue; a changed one becomes a new revision)."""
+    import hashlib
+
+    return hashlib.sha256(_describe(cfg).encode()).hexdigest()[:8]
+
+
+def _store(run_dir: Path, cfg: Config, engine, unit: Unit, outcome, hz: int, fps: float) -> str:
+    suite, task, ep = unit.key.split("/", 2)
+    ch = outcome if isinstance(outcome, Characterization) else None
+    q = outcome if isinstance(outcome, QuarantineEntry) else None
+    char_file = run_dir / "stage3" / "characterizations" / suite / task / f"{ep}.json"
+    q_file = run_dir / "stage3" / "quarantine" / suite / task / f"{ep}.json"
+    if ch is not None:
+        write_json(char_file, ch.model_dump(mode="json"))
+        q_file.unlink(missing_ok=True)  # an earlier characterizer's failure no longer applies
+    elif q is not None and q.stage == "stage3":
+        write_json(q_file, q.model_dump(mode="json"))
+        char_file.unlink(missing_ok=True)
+    with write_session(engine) as s:
+        enqueue(
+            s, key=unit.key, instruction=unit.localization.instruction if unit.localization else _instruction(run_dir, unit),
+            proposal=proposal_for(unit, ch, q), context=context(run_dir, unit, hz, fps),
+            required_reviews=cfg.stage3.reviews_per_item, quarantined=q is not None,
+            reason=f"{q.stage}:{q.reason}" if q else None, detail=q.detail if q else None,
+        )
+    if ch is not None:
+        return "characterized"
+    return "quarantined_stage3" if q is not None and q.stage == "stage3" else "quarantined_stage2"
+
+
+def _instruction(run_dir: Path, unit: Unit) -> str:
+    """A quarantined episode's instruction, from the stage-1 manifest when it is there."""
+    manifest = run_dir / "stage1" / "episodes.parquet"
+    if manifest.is_file():
+        import pyarrow.parquet as pq
+
+        suite, task, ep = unit.key.split("/", 2)
+        for row in pq.read_table(manifest, columns=["suite", "task", "episode_id", "instruction"]).to_pylist():
+            if (row["suite"], row["task"], row["episode_id"]) == (suite, task, ep):
+                return row["instruction"]
+    return unit.key.split("/")[1].replace("_", " ")

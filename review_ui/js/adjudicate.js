@@ -1,0 +1,122 @@
+// The adjudication page: per field, the model's and every reviewer's value side by side;
+// only the disputed fields are decided here, with a required rationale.
+import { api, ApiError, newKey } from "./api.js";
+import { CATEGORY_KEYS, h } from "./dom.js";
+import { FieldControls, FIELD_LABELS, FIELDS, showValue } from "./fields.js";
+import { episodeHeader, mediaKeys, playerAndTracks, versionLine } from "./item_common.js";
+
+const CATEGORY_BY_KEY = Object.fromEntries(Object.entries(CATEGORY_KEYS).map(([c, k]) => [k.toLowerCase(), c]));
+const REVIEWER_COLORS = ["#7c3aed", "#0891b2", "#db2777", "#65a30d"];
+
+export async function adjudicatePage(root, id, app) {
+  let item = await api(`/api/items/${id}/adjudication`);
+  let claimError = null;
+  if (item.status === "conflict" || item.status === "adjudicating") {
+    try { item.version = (await api(`/api/items/${id}/claim`, { method: "POST" })).version; }
+    catch (e) { if (!(e instanceof ApiError)) throw e; claimError = e.message; }
+  }
+  const p = item.proposal;
+  const disputed = item.disputed;
+  const decidable = !claimError && (item.status === "conflict" || item.status === "adjudicating");
+  const media = await playerAndTracks(item, {
+    markers: (values) => [
+      { t: p.fail_time_s, label: "model", short: "model", color: "#ea580c", dash: true },
+      ...item.reviews.map((r, i) => ({ t: r.values ? r.values.fail_time_s : null, label: r.reviewer, short: r.reviewer,
+        color: REVIEWER_COLORS[i % REVIEWER_COLORS.length] })),
+      { t: values.fail_time_s ?? item.agreed.fail_time_s, label: "your decision", short: "final", color: "#2563eb" },
+    ],
+  });
+  const controls = new FieldControls({
+    fields: disputed, values: {}, suggested: p, choices: item.choices, duration: item.media.duration_s,
+    getPlayhead: () => media.player.simTimeOfFrame(media.player.frame()),
+    onChange: (values) => media.tracks.setMarkers(media.markers(values)),
+  });
+
+  const cell = (f, v, extra) => h("td", { dataset: { field: f } }, showValue(f, v), extra || "");
+  const useBtn = (f, v) => (decidable && disputed.includes(f) && v != null)
+    ? h("button", { type: "button", className: "use", title: "use this value", onclick: () => controls.set(f, v) }, "use") : null;
+  const table = h("table", { className: "compare", id: "compare" },
+    h("thead", {}, h("tr", {}, h("th", {}, "field"), h("th", {}, "model ", h("span", { className: "pill" }, "suggestion")),
+      ...item.reviews.map((r, i) => h("th", {}, h("i", { className: "dot", style: `background:${REVIEWER_COLORS[i % 4]}` }), r.reviewer,
+        h("span", { className: "muted" }, ` · ${r.decision}`))),
+      h("th", {}, "outcome"))),
+    h("tbody", {}, ...FIELDS.map((f) => h("tr", { className: disputed.includes(f) ? "disputed" : "agreed", dataset: { field: f } },
+      h("th", {}, FIELD_LABELS[f], disputed.includes(f) ? h("span", { className: "pill warn" }, "disputed") : null),
+      cell(f, p[f], useBtn(f, p[f])),
+      ...item.reviews.map((r) => r.values ? cell(f, r.values[f], useBtn(f, r.values[f]))
+        : h("td", { className: "flagged" }, "flagged: ", h("q", {}, r.reason))),
+      h("td", {}, disputed.includes(f) ? h("span", { className: "muted" }, "decide below")
+        : h("span", {}, showValue(f, item.agreed[f]), " ", h("span", { className: "pill ok" }, "agreed")))))));
+
+  const rationale = h("textarea", { id: "rationale", rows: 3, placeholder: "why this outcome (required; kept in the audit log)",
+    oninput: () => rationale.classList.remove("invalid") });
+  const exclude = h("input", { type: "checkbox", id: "exclude" });
+  const status = h("div", { className: "decision-status", id: "adjudication-status" });
+  const setStatus = (kind, text, extra) => { status.className = `decision-status ${kind}`; status.replaceChildren(h("span", {}, text), extra || ""); };
+  let busy = false;
+
+  async function submit() {
+    if (busy || !decidable) return;
+    const body = { fields: exclude.checked ? {} : controls.values, rationale: rationale.value, exclude: exclude.checked,
+      version: item.version, idempotency_key: newKey() };
+    body.fields = Object.fromEntries(Object.entries(body.fields).filter(([, v]) => v != null && v !== ""));
+    busy = true;
+    setStatus("busy", "Saving…");
+    try {
+      const r = await api(`/api/items/${id}/adjudication`, { method: "POST", body });
+      setStatus("saved", `Final (${r.resolution})${r.replayed ? " · already saved" : ""}`);
+      app.toast(`Adjudicated item ${id}: final`);
+      setTimeout(() => app.go("#/queue"), 800);
+    } catch (e) {
+      if (!(e instanceof ApiError)) throw e;
+      if (e.status === 422 && e.field === "rationale") rationale.classList.add("invalid");
+      else if (e.status === 422) controls.showError(e.field, e.message);
+      setStatus("error", `Not saved (${e.status}): ${e.message}`,
+        e.status === 409 ? h("button", { type: "button", onclick: () => app.route() }, "Reload") : null);
+    } finally { busy = false; }
+  }
+
+  const finalBox = item.status === "final" ? h("section", { className: "card" }, h("h3", {}, `Final · ${item.resolution}`),
+    item.adjudicator ? h("p", {}, `adjudicated by ${item.adjudicator}`) : null,
+    h("dl", {}, ...FIELDS.flatMap((f) => [h("dt", {}, FIELD_LABELS[f]), h("dd", {}, showValue(f, (item.final || {})[f]))]))) : null;
+  const side = h("aside", { className: "side wide" },
+    claimError ? h("div", { className: "banner error" }, claimError) : null,
+    h("section", { className: "card" }, h("h3", {}, "Model and reviewers, per field"), versionLine(p), table),
+    decidable ? h("section", { className: "card decision" },
+      h("h3", {}, `Decide the disputed field${disputed.length > 1 ? "s" : ""}`),
+      controls.el,
+      h("label", { htmlFor: "rationale", className: "field-label" }, "Rationale"), rationale,
+      h("label", { className: "exclude" }, exclude, " Not a usable failure: exclude it (final, not exported)"),
+      h("div", { className: "decision-buttons" },
+        h("button", { type: "button", className: "primary", id: "btn-adjudicate", onclick: submit }, "Make final ", h("kbd", {}, "S")),
+        h("button", { type: "button", className: "ghost", onclick: () => app.go("#/queue") }, "Back to queue ", h("kbd", {}, "Q"))),
+      status) : finalBox);
+  const history = h("details", { className: "card history", id: "history" }, h("summary", {}, "History of this item"),
+    h("p", { className: "muted" }, "loading…"));
+  history.addEventListener("toggle", async () => {
+    if (!history.open || history.dataset.loaded) return;
+    history.dataset.loaded = "1";
+    const { events } = await api(`/api/items/${id}/history`);
+    history.replaceChildren(history.firstChild, h("ol", { className: "events" }, ...events.map((e) => h("li", {},
+      h("span", { className: "muted" }, e.at.replace("T", " ").replace("+00:00", " UTC")), " ", h("b", {}, e.actor), " ",
+      h("span", { className: "pill" }, e.kind), e.item_id !== id ? h("span", { className: "muted" }, ` (item ${e.item_id})`) : null,
+      e.after && e.after.status ? ` → ${e.after.status}` : "", e.detail ? h("q", {}, e.detail) : null))));
+  });
+  side.append(history);
+  root.replaceChildren(episodeHeader(item), h("div", { className: "item-layout" }, h("div", { className: "stage" }, media.el), side));
+  media.start();
+
+  return {
+    destroy: () => media.destroy(),
+    onKey(e) {
+      const k = e.key.toLowerCase();
+      if (mediaKeys(e, media.player)) return true;
+      if (k === "m" && p.fail_time_s != null) { media.player.seekSim(p.fail_time_s); return true; }
+      if (k === "t") { controls.setTimeAtPlayhead(); return true; }
+      if (["1", "2", "3", "4"].includes(k)) { controls.set("recovery_level", `L${k}`); return true; }
+      if (CATEGORY_BY_KEY[k]) { controls.set("failure_category", CATEGORY_BY_KEY[k]); return true; }
+      if (k === "s") { submit(); return true; }
+      return false;
+    },
+  };
+}

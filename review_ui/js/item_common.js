@@ -1,0 +1,59 @@
+// Pieces both item pages share: the episode header, video + evidence on one playhead,
+// the video keys.
+import { api } from "./api.js";
+import { h } from "./dom.js";
+import { Player } from "./player.js";
+import { Tracks } from "./tracks.js";
+
+export function episodeHeader(item) {
+  return h("header", { className: "episode" },
+    h("div", { className: "instruction", id: "instruction" }, "“", item.instruction, "”"),
+    h("div", { className: "muted key" }, `${item.key} · revision ${item.revision}`,
+      item.quarantined ? h("span", { className: "pill quarantine" }, "quarantined") : null));
+}
+
+export function versionLine(p) {
+  const loc = p.localizer || {}, ch = p.characterizer || {};
+  const v = (x) => [x.model || x.source, x.prompt_name ? `${x.prompt_name}${x.prompt_hash ? `@${x.prompt_hash.slice(0, 8)}` : ""}` : null]
+    .filter(Boolean).join(" · ") || "—";
+  return h("div", { className: "version", id: "model-version" },
+    h("div", {}, h("b", {}, "time by "), v(loc)), h("div", {}, h("b", {}, "labels by "), v(ch)));
+}
+
+// video + evidence tracks kept on one playhead; `markers(values)` gives the time markers
+export async function playerAndTracks(item, { markers }) {
+  const [frames, evidence] = await Promise.all([
+    item.media.has_frames ? api(`/api/items/${item.id}/frames`) : null,
+    item.media.has_evidence ? api(`/api/items/${item.id}/evidence`) : null,
+  ]);
+  let tracks = null;
+  const player = new Player(item.media, frames, {
+    modelTime: item.proposal.fail_time_s,
+    onTick: (pl) => { if (tracks) tracks.setPlayhead(pl.main.paused ? pl.simTimeOfFrame(pl.frame()) : pl.simTime()); },
+  });
+  tracks = new Tracks({
+    evidence, media: item.media, markers: markers({ ...item.proposal, ...(item.my_review?.values || {}) }),
+    onSeek: (t) => player.seekSim(t),
+  });
+  const el = h("div", { className: "media" }, player.el, tracks.el);
+  return {
+    el, player, tracks, markers,
+    start: () => { tracks.draw(); tracks.updateReadout(); },
+    destroy: () => player.destroy(),
+  };
+}
+
+// returns true when the key was a video key
+export function mediaKeys(e, player) {
+  const big = e.shiftKey ? 10 : 1;
+  switch (e.key) {
+    case " ": player.toggle(); return true;
+    case "ArrowLeft": case ",": player.step(-big); return true;
+    case "ArrowRight": case ".": player.step(big); return true;
+    case "[": player.faster(-1); return true;
+    case "]": player.faster(1); return true;
+    case "Home": player.seekFrame(0); return true;
+    case "End": player.seekFrame(player.nFrames - 1); return true;
+    default: return false;
+  }
+}

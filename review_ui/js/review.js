@@ -1,0 +1,142 @@
+// The item page: video + evidence on one playhead, the model's suggestion, the decision.
+// A reviewer sees the model's proposal (as a suggestion, with model and prompt version) and
+// never another reviewer's decision (the API does not send them).
+import { api, ApiError, newKey } from "./api.js";
+import { CATEGORY_KEYS, fmtTime, h } from "./dom.js";
+import { FieldControls, FIELDS, showValue } from "./fields.js";
+import { episodeHeader, mediaKeys, playerAndTracks, versionLine } from "./item_common.js";
+
+const CATEGORY_BY_KEY = Object.fromEntries(Object.entries(CATEGORY_KEYS).map(([c, k]) => [k.toLowerCase(), c]));
+
+export async function reviewPage(root, id, app) {
+  const item = await api(`/api/items/${id}`);
+  let taken = null;  // the item is full: other reviewers hold every place
+  if (item.state === "open" && !item.my_review) {
+    try { await api(`/api/items/${id}/lease`, { method: "POST" }); }
+    catch (e) { if (!(e instanceof ApiError)) throw e; if (e.status === 409) taken = e.message; }
+  }
+  const p = item.proposal;
+  const open = item.state === "open" && !taken;
+  const start = item.my_review && item.my_review.values ? item.my_review.values : p;
+  const view = { version: item.version, busy: false, pendingAccept: false };
+
+  const media = await playerAndTracks(item, {
+    markers: (values) => [
+      { t: p.fail_time_s, label: "model's failure time", short: "model", color: "#ea580c", dash: true },
+      { t: values.fail_time_s, label: "your failure time", short: "you", color: "#2563eb" },
+    ],
+  });
+  const controls = new FieldControls({
+    values: Object.fromEntries(FIELDS.map((f) => [f, start[f] ?? null])),
+    suggested: p, choices: item.choices, duration: item.media.duration_s,
+    getPlayhead: () => media.player.simTimeOfFrame(media.player.frame()),
+    onChange: (values) => { media.tracks.setMarkers(media.markers(values)); view.pendingAccept = false; },
+  });
+
+  const status = h("div", { className: "decision-status", id: "decision-status" });
+  const reason = h("textarea", { id: "flag-reason", rows: 2, placeholder: "why is this ambiguous? (required)" });
+  const flagBox = h("div", { className: "flag-box", id: "flag-box", hidden: true }, h("label", { htmlFor: "flag-reason" }, "Reason for the flag"), reason,
+    h("button", { type: "button", className: "warn", id: "btn-flag-confirm", onclick: () => submit("flag") }, "Flag as ambiguous ", h("kbd", {}, "Enter")),
+    h("p", { className: "field-error", id: "err-reason", hidden: true }));
+  reason.addEventListener("keydown", (e) => { if (e.key === "Enter" && !e.shiftKey) { e.preventDefault(); submit("flag"); } });
+  const btn = (id, cls, label, key, fn) => h("button", { type: "button", id, className: cls, onclick: fn }, label, " ", h("kbd", {}, key));
+  const buttons = h("div", { className: "decision-buttons" },
+    btn("btn-accept", "primary", "Accept suggestion", "A", () => submit("accept")),
+    btn("btn-revise", "secondary", "Submit revision", "S", () => submit("revise")),
+    btn("btn-flag", "warn-outline", "Flag ambiguous", "F", () => openFlag()),
+    btn("btn-next", "ghost", "Next item", "N", () => app.next()));
+
+  function setStatus(kind, text, extra) {
+    status.className = `decision-status ${kind}`;
+    status.replaceChildren(h("span", {}, text), extra || "");
+  }
+  function openFlag() { flagBox.hidden = false; reason.focus(); }
+  function showMine(r) {
+    if (!r) return;
+    const what = r.decision === "flag" ? `flagged as ambiguous (“${r.reason}”)` : r.decision === "accept" ? "accepted the suggestion" : `revised ${r.edited.join(", ")}`;
+    setStatus("saved", `Your decision: ${what} · version ${r.version}${open ? " · you can still change it" : " · closed"}`);
+  }
+
+  async function submit(decision) {
+    if (view.busy || !open) return;
+    const body = { decision, version: view.version, idempotency_key: newKey() };
+    if (decision === "revise") {
+      body.fields = controls.edits();
+      if (!Object.keys(body.fields).length) return setStatus("error", "Nothing is edited: change a field, or press A to accept the suggestion.");
+    }
+    if (decision === "accept" && incomplete) return setStatus("error", "The model proposed no complete values: set every field and press S.");
+    if (decision === "accept" && Object.keys(controls.edits()).length && !view.pendingAccept) {
+      view.pendingAccept = true;
+      return setStatus("warning", "You have edits. Press S to submit them, or A again to discard them and accept the suggestion.");
+    }
+    if (decision === "flag") {
+      if (flagBox.hidden) return openFlag();
+      body.reason = reason.value.trim();
+    }
+    view.busy = true;
+    buttons.querySelectorAll("button").forEach((b) => { b.disabled = true; });
+    setStatus("busy", "Saving…");
+    try {
+      const r = await api(`/api/items/${id}/review`, { method: "POST", body });
+      view.version = r.version;
+      const word = { accept: "Accepted", revise: "Revision saved", flag: "Flagged" }[decision];
+      setStatus("saved", `${word}${r.replayed ? " (already saved)" : ""} · version ${r.version}`);
+      app.toast(`${word}: item ${id}`);
+      setTimeout(() => app.next(), 700);
+    } catch (e) {
+      if (!(e instanceof ApiError)) throw e;
+      if (e.status === 422) {
+        if (e.field === "reason") {
+          const er = flagBox.querySelector("#err-reason");
+          er.hidden = false;
+          er.textContent = e.message;
+        } else controls.showError(e.field, e.message);
+        setStatus("error", `Not saved: ${e.message}`);
+      } else if (e.status === 409) {
+        setStatus("error", `Not saved: ${e.message}`, h("button", { type: "button", id: "btn-reload", onclick: () => app.route() }, "Reload"));
+      } else setStatus("error", `Not saved (${e.status}): ${e.message}`);
+    } finally {
+      view.busy = false;
+      buttons.querySelectorAll("button").forEach((b) => { b.disabled = false; });
+    }
+  }
+
+  const suggestion = h("section", { className: "card suggestion", id: "suggestion" },
+    h("h3", {}, "Model suggestion ", h("span", { className: "pill" }, "suggestion")),
+    versionLine(p),
+    h("dl", {}, ...FIELDS.flatMap((f) => [h("dt", {}, f.replaceAll("_", " ")), h("dd", { dataset: { field: f } }, showValue(f, p[f]))])),
+    h("div", { className: "suggestion-actions" },
+      p.fail_time_s != null ? h("button", { type: "button", className: "ghost", onclick: () => media.player.seekSim(p.fail_time_s) }, "Jump to ", fmtTime(p.fail_time_s), " ", h("kbd", {}, "M")) : null));
+
+  const side = h("aside", { className: "side" },
+    taken ? h("div", { className: "banner error", id: "taken-banner" }, taken, " · press ", h("kbd", {}, "N"), " for the next item") : null,
+    item.quarantined ? h("div", { className: "banner quarantine", id: "quarantine-banner" },
+      h("b", {}, "Quarantined model output"), ` · ${item.quarantine_reason}`,
+      item.quarantine_detail ? h("div", { className: "muted" }, item.quarantine_detail) : null,
+      h("div", {}, "The model gave no usable values: set every field yourself and submit a revision.")) : null,
+    suggestion,
+    h("section", { className: "card decision" }, h("h3", {}, "Your decision"), controls.el, flagBox, buttons, status));
+  root.replaceChildren(episodeHeader(item), h("div", { className: "item-layout" }, h("div", { className: "stage" }, media.el), side));
+  if (!open) { controls.disable(true); buttons.querySelectorAll("button:not(#btn-next)").forEach((b) => { b.disabled = true; }); }
+  const incomplete = FIELDS.some((f) => p[f] == null);  // nothing complete to accept: revise instead
+  if (incomplete) { const a = buttons.querySelector("#btn-accept"); a.disabled = true; a.title = "the model proposed no complete values"; }
+  showMine(item.my_review);
+  media.start();
+
+  return {
+    destroy: () => media.destroy(),
+    onKey(e) {
+      const k = e.key.toLowerCase();
+      if (mediaKeys(e, media.player)) return true;
+      if (k === "m" && p.fail_time_s != null) { media.player.seekSim(p.fail_time_s); return true; }
+      if (k === "t") { controls.setTimeAtPlayhead(); return true; }
+      if (["1", "2", "3", "4"].includes(k)) { controls.set("recovery_level", `L${k}`); return true; }
+      if (CATEGORY_BY_KEY[k]) { controls.set("failure_category", CATEGORY_BY_KEY[k]); return true; }
+      if (k === "a") { submit("accept"); return true; }
+      if (k === "s") { submit("revise"); return true; }
+      if (k === "f") { openFlag(); return true; }
+      if (k === "n") { app.next(); return true; }
+      return false;
+    },
+  };
+}

@@ -1,0 +1,81 @@
+"""Reviewers deciding the same items at the same time, against the real server and SQLite."""
+
+from __future__ import annotations
+
+import threading
+
+import httpx
+from sqlalchemy import func, select
+
+from pipeline.review.db import Item, Review, User, read_session
+
+
+def _stored(engine) -> dict[tuple[int, str], str]:
+    with read_session(engine) as s:
+        rows = s.execute(select(Review.item_id, User.name, Review.decision)
+                         .join(User, User.id == Review.reviewer_id)).all()
+    return {(i, n): d for i, n, d in rows}
+
+
+def test_concurrent_reviewers_lose_no_decision_and_never_exceed_k(server, engine, people, items):
+    names = ["ann", "bob", "cat"]  # three people racing for K = 2 places on every item
+    barrier = threading.Barrier(len(names))
+    results: dict[str, list[tuple[int, int, dict]]] = {n: [] for n in names}
+
+    def reviewer(name: str) -> None:
+        with httpx.Client(base_url=server.url, headers={"Authorization": f"Bearer {people[name]}"}, timeout=30) as c:
+            for item_id in items:
+                barrier.wait()
+                body = {"decision": "revise", "version": 0, "idempotency_key": f"{name}-{item_id}",
+                        "fields": {"fail_time_s": 1.0, "recovery_level": "L1", "failure_category": "grasp_failure",
+                                   "recovery_action": f"retry ({name})"}}
+                r = c.post(f"/api/items/{item_id}/review", json=body)
+                results[name].append((item_id, r.status_code, r.json()))
+                # the same decision again at once (a double click) must change nothing
+                r2 = c.post(f"/api/items/{item_id}/review", json=body)
+                if r.status_code == 200:
+                    assert r2.status_code == 200 and r2.json()["replayed"] is True
+
+    threads = [threading.Thread(target=reviewer, args=(n,)) for n in names]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(timeout=120)
+    assert not any(t.is_alive() for t in threads)
+
+    stored = _stored(engine)
+    accepted = {(i, n) for n in names for i, code, _ in results[n] if code == 200}
+    refused = [(i, n, body) for n in names for i, code, body in results[n] if code != 200]
+    assert accepted == set(stored)  # every acknowledged decision is in the database, nothing else
+    assert all(code in (200, 409) for n in names for _, code, _ in results[n])
+    assert all("reviews" in body["detail"] for _, _, body in refused)
+    with read_session(engine) as s:
+        per_item = dict(s.execute(select(Review.item_id, func.count()).group_by(Review.item_id)).all())
+        n_reviews = dict(s.execute(select(Item.id, Item.n_reviews)).all())
+    assert per_item == {i: 2 for i in items}
+    assert n_reviews == per_item
+    assert len(refused) == len(items)
+
+
+def test_two_reviewers_pulling_from_the_queue_at_once_share_items_up_to_k(server, engine, people, items):
+    decided: dict[str, list[int]] = {"ann": [], "bob": []}
+
+    def work(name: str) -> None:
+        with httpx.Client(base_url=server.url, headers={"Authorization": f"Bearer {people[name]}"}, timeout=30) as c:
+            while True:
+                nxt = c.post("/api/queue/next").json()["item"]
+                if nxt is None:
+                    return
+                body = {"decision": "flag", "reason": "race", "version": 0, "idempotency_key": f"{name}-{nxt}"}
+                r = c.post(f"/api/items/{nxt}/review", json=body)
+                assert r.status_code == 200, r.text
+                decided[name].append(nxt)
+
+    threads = [threading.Thread(target=work, args=(n,)) for n in decided]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(timeout=120)
+    # with K = 2 and two reviewers, each of them reviews every item exactly once
+    assert sorted(decided["ann"]) == sorted(items) == sorted(decided["bob"])
+    assert len(_stored(engine)) == 2 * len(items)
