@@ -1,0 +1,1 @@
+"""Release of the scenario set: build, verify, certify, reproduce, export to LeRobot."""

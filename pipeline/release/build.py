@@ -1,0 +1,155 @@
+"""`recover release`: assemble the scenario set from final reviewed annotations.
+
+Inputs: the run folder (see `pipeline.release.sources`) and `cfg.release`.
+Output folder (default `<run>/release/`):
+    selected_bddl_scenes_<suite>/<task>/episode_<id>/step_<NNNN>.bddl
+                                                    step_<NNNN>_sim_state.npy
+                                                    step_<NNNN>_history[...]   pre-failure history
+    scenarios.parquet        the manifest (`pipeline.release.manifest`), certificate included
+    README.md, figures/      the dataset card (`pipeline.release.card`)
+    SHA256SUMS               every released file above (`sha256sum -c SHA256SUMS` works)
+    _build/                  NOT part of the set: build time, quarantined annotations, cache
+Invariants: released bytes depend only on the inputs and the config (no timestamps, no
+absolute paths, sorted rows), so the same config and seed rebuild them byte for byte; scene
+files are copied unchanged; files of scenes no longer released are removed.
+"""
+
+from __future__ import annotations
+
+import datetime
+from pathlib import Path
+
+from rich.console import Console
+
+from pipeline.atomic import write_bytes, write_json, write_text
+from pipeline.config import Config
+from pipeline.release.card import FIGURE, render_card, write_figure
+from pipeline.release.certify import SceneRef, certify_all
+from pipeline.release.manifest import MANIFEST_NAME, ScenarioRow, sha256_file, write_manifest
+from pipeline.records import QuarantineEntry
+from pipeline.release.sources import ReleaseItem, gather
+
+SUMS_NAME = "SHA256SUMS"
+BUILD_DIR = "_build"
+
+
+def release_dir(cfg: Config) -> Path:
+    return Path(cfg.release.output_dir) if cfg.release.output_dir else cfg.out / "release"
+
+
+def scene_dir(suite: str, task: str, ep_id: str) -> str:
+    return f"selected_bddl_scenes_{suite}/{task}/episode_{ep_id}"
+
+
+def _copy(src: Path, dst: Path) -> None:
+    if not dst.is_file() or dst.read_bytes() != src.read_bytes():
+        write_bytes(dst, src.read_bytes())
+
+
+def _place_files(item: ReleaseItem, out: Path) -> tuple[str, str, list[str]]:
+    """Copy the scene pair and history; return their release-relative paths."""
+    base = f"{scene_dir(item.suite, item.episode.task, item.episode.episode_id)}/step_{item.step:04d}"
+    bddl, state = f"{base}.bddl", f"{base}_sim_state.npy"
+    _copy(item.scene_bddl, out / bddl)
+    _copy(item.scene_state, out / state)
+    history: list[str] = []
+    h = item.history
+    if h is not None and h.is_file():
+        history.append(f"{base}_history{''.join(h.suffixes)}")
+        _copy(h, out / history[-1])
+    elif h is not None and h.is_dir():
+        for f in sorted(p for p in h.rglob("*") if p.is_file()):
+            history.append(f"{base}_history/{f.relative_to(h).as_posix()}")
+            _copy(f, out / history[-1])
+    return bddl, state, history
+
+
+def _row(item: ReleaseItem, out: Path, bddl: str, state: str, history: list[str], state_dim: int) -> ScenarioRow:
+    a, loc, ep = item.annotation, item.localization, item.episode
+    char_hash = a.model_proposal.characterizer.get("prompt_hash")
+    return ScenarioRow(
+        suite=ep.suite, task=ep.task, instruction=ep.instruction, episode_id=ep.episode_id,
+        init_state=ep.init_state, step=item.step, fail_time_s=a.fail_time_s, fail_step=a.fail_step,
+        level=a.recovery_level.value, category=a.failure_category.value, recovery_action=a.recovery_action,
+        policy=ep.policy,
+        policy_kind=ep.policy_kind, seed=ep.seed, localize_prompt_hash=loc.prompt_hash,
+        characterize_prompt_hash=char_hash, reviewers=len({r.reviewer for r in a.reviews}),
+        adjudicated=a.adjudication is not None, state_dim=state_dim,
+        bddl_path=bddl, bddl_sha256=sha256_file(out / bddl), state_path=state,
+        state_sha256=sha256_file(out / state), history_paths=history,
+        history_sha256=[sha256_file(out / p) for p in history],
+    )
+
+
+def _remove_stale(out: Path, keep: set[str]) -> int:
+    removed = 0
+    for d in out.glob("selected_bddl_scenes_*"):
+        for p in sorted(d.rglob("*"), reverse=True):
+            if p.is_file() and p.relative_to(out).as_posix() not in keep:
+                p.unlink()
+                removed += 1
+            elif p.is_dir() and not any(p.iterdir()):
+                p.rmdir()
+    return removed
+
+
+def build(cfg: Config, console: Console | None = None) -> list[ScenarioRow]:
+    import numpy as np
+
+    console = console or Console()
+    out = release_dir(cfg)
+    items, skipped = gather(cfg.out)
+    rows = []
+    for item in items:
+        try:  # a state that does not load is set aside here; verify checks the rest
+            dim = int(np.load(item.scene_state, allow_pickle=False).shape[0])
+        except (OSError, ValueError, EOFError, IndexError) as e:
+            skipped.append(QuarantineEntry(key=item.annotation.key, stage="release", source="stage2",
+                                           reason="unreadable_state", detail=f"{item.scene_state}: {e}"))
+            continue
+        bddl, state, history = _place_files(item, out)
+        rows.append(_row(item, out, bddl, state, history, dim))
+
+    refs = [SceneRef(r.suite, r.task, r.instruction, out / r.bddl_path, out / r.state_path,
+                     f"{r.bddl_sha256[:16]}-{r.state_sha256[:16]}") for r in rows]
+    certs = certify_all(refs, cfg, out / BUILD_DIR / "certificates")
+    for i, ref in enumerate(refs):
+        c = certs.get(ref.cache_key)
+        if c is not None:
+            rows[i] = rows[i].model_copy(update={"certified": c.certified, "certify_tries": c.tries,
+                                                 "certify_successes": c.successes})
+
+    write_manifest(out / MANIFEST_NAME, rows)
+    write_figure(rows, out / FIGURE)
+    hashes = {
+        "localization": sorted({r.localize_prompt_hash for r in rows if r.localize_prompt_hash}),
+        "characterization": sorted({r.characterize_prompt_hash for r in rows if r.characterize_prompt_hash}),
+    }
+    people = {r.reviewer for it in items for r in it.annotation.reviews}
+    write_text(out / "README.md", render_card(rows, cfg, hashes, len(people)))
+
+    released = sorted({p for r in rows for p, _ in r.files()} | {MANIFEST_NAME, FIGURE, "README.md"})
+    removed = _remove_stale(out, set(released))
+    write_text(out / SUMS_NAME, "".join(f"{sha256_file(out / p)}  {p}\n" for p in released))
+
+    # outside the checksummed set: when it was built and what was left out, with reasons
+    write_json(out / BUILD_DIR / "build_info.json", {
+        "built_at": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
+        "scenes": len(rows), "skipped": len(skipped), "stale_files_removed": removed,
+    })
+    write_text(out / BUILD_DIR / "quarantine.jsonl", "".join(q.model_dump_json() + "\n" for q in skipped))
+    colour = "green" if rows else "yellow"
+    console.print(f"[{colour}]released {len(rows)} scene(s)[/{colour}] to {out}"
+                  + (f"; [yellow]{len(skipped)} annotation(s) set aside[/yellow] (see {out / BUILD_DIR / 'quarantine.jsonl'})"
+                     if skipped else ""))
+    for q in skipped:
+        console.print(f"  [yellow]{q.reason}[/yellow] {q.key}: {q.detail}", highlight=False)
+    return rows
+
+
+def run(cfg: Config) -> None:
+    from pipeline.config import save_resolved
+
+    out = release_dir(cfg)
+    build(cfg)
+    save_resolved(cfg, out / BUILD_DIR)

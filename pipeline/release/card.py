@@ -1,0 +1,128 @@
+"""The dataset card: `README.md` (tables and provenance) and a stacked-bar PNG.
+
+Inputs: the manifest rows, the resolved config, the package versions. Outputs: markdown
+text and `figures/scenes_by_suite_level.png`. Invariant: deterministic bytes for the same
+inputs (no dates, no absolute paths: output folders and database URLs are redacted from
+the config; PNG written without software/date metadata).
+"""
+
+from __future__ import annotations
+
+import sys
+from collections import Counter
+from importlib import metadata
+from pathlib import Path
+
+import yaml
+
+from pipeline.atomic import write_with
+from pipeline.config import Config
+from pipeline.records import Category, Level
+from pipeline.release.manifest import ScenarioRow
+
+FIGURE = "figures/scenes_by_suite_level.png"
+LEVELS = [lv.value for lv in Level]
+CATEGORIES = [c.value for c in Category]
+
+
+def versions() -> dict[str, str]:
+    out = {"python": ".".join(map(str, sys.version_info[:3]))}
+    for pkg in ("libero", "robosuite", "mujoco", "bddl", "libero-recover"):
+        try:
+            out[pkg] = metadata.version(pkg)
+        except metadata.PackageNotFoundError:
+            out[pkg] = "not installed"
+    return out
+
+
+def portable_config(cfg: Config) -> dict:
+    """The config as saved in the card: paths that depend on where it ran are redacted."""
+    d = cfg.model_dump(mode="json")
+    d["run"]["output_dir"] = "<run>"
+    d["release"]["output_dir"] = None
+    for stage in ("stage3",):
+        if d[stage].get("db_url"):
+            d[stage]["db_url"] = "<redacted>"
+    return d
+
+
+def _table(header: list[str], rows: list[list]) -> str:
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(str(c) for c in r) + " |" for r in rows]
+    return "\n".join(lines)
+
+
+def write_figure(rows: list[ScenarioRow], path: Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    suites = sorted({r.suite for r in rows}) or ["(none)"]
+    counts = Counter((r.suite, r.level) for r in rows)
+    fig, ax = plt.subplots(figsize=(1.6 + 1.3 * len(suites), 3.6), dpi=100)
+    bottom = [0] * len(suites)
+    for level in LEVELS:
+        vals = [counts[(s, level)] for s in suites]
+        ax.bar(suites, vals, bottom=bottom, label=level)
+        bottom = [b + v for b, v in zip(bottom, vals)]
+    ax.set_ylabel("scenes")
+    ax.set_title("Scenes by suite and recovery level")
+    ax.legend(title="level", fontsize=8)
+    ax.tick_params(axis="x", labelsize=8)
+    fig.tight_layout()
+    write_with(path, lambda p: fig.savefig(p, format="png", metadata={"Software": None}))
+    plt.close(fig)
+
+
+def render_card(rows: list[ScenarioRow], cfg: Config, prompt_hashes: dict[str, list[str]], reviewers: int) -> str:
+    suites = sorted({r.suite for r in rows})
+    by_sl = Counter((r.suite, r.level) for r in rows)
+    by_cat = Counter(r.category for r in rows)
+    certified = sum(r.certified is True for r in rows)
+    attempted = sum(r.certified is not None for r in rows)
+    level_rows = [[s, *(by_sl[(s, lv)] for lv in LEVELS), sum(by_sl[(s, lv)] for lv in LEVELS)] for s in suites]
+    level_rows.append(["**total**", *(sum(by_sl[(s, lv)] for s in suites) for lv in LEVELS), len(rows)])
+    cat_rows = [[c, by_cat[c]] for c in CATEGORIES if by_cat[c]] or [["(none)", 0]]
+    hashes = "\n".join(f"- {k}: {', '.join(f'`{h}`' for h in v) or '(none)'}" for k, v in prompt_hashes.items())
+    vers = "\n".join(f"- {k}: {v}" for k, v in versions().items())
+    return f"""# libero-recover scenario set
+
+Restorable failure scenes mined from real executions of robot policies in LIBERO, each
+labelled by people with a recovery level, a failure category and a recovery action.
+Every scene is a pair: a BDDL problem file (`step_<NNNN>.bddl`) and the flattened MuJoCo
+state (`step_<NNNN>_sim_state.npy`: time, qpos, qvel) at the failure, with the episode's
+pre-failure history beside it. `scenarios.parquet` lists every scene with its labels and
+the SHA-256 of each file; `recover verify <this folder>` checks a copy.
+
+## Scenes per suite and recovery level ({len(rows)} scenes)
+
+{_table(["suite", *LEVELS, "total"], level_rows)}
+
+![scenes by suite and level]({FIGURE})
+
+## Scenes per failure category
+
+{_table(["category", "scenes"], cat_rows)}
+
+## Recoverability certificate
+
+The clean scripted expert was run from each scene up to {cfg.release.certify_tries} times
+(horizon {cfg.release.certify_horizon} steps); a success certifies the scene recoverable.
+Not certified is not a rejection. Certified: {certified} of {attempted} attempted.
+
+## How it was made
+
+- failure-generator policies: {", ".join(sorted({r.policy for r in rows})) or "(none)"}
+- reviewers: {reviewers} distinct people; only final reviewed annotations are released
+- prompt hashes:
+{hashes}
+- versions:
+{vers}
+
+Resolved configuration (output locations redacted):
+
+```yaml
+{yaml.safe_dump(portable_config(cfg), sort_keys=False).rstrip()}
+```
+"""

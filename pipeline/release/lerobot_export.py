@@ -1,0 +1,156 @@
+"""`recover export-lerobot`: rollouts and pre-failure histories as LeRobot v2.1 datasets.
+
+Inputs: stage 1 (`episodes.parquet`, each episode's `states.npy` + `steps.parquet`) and the
+release manifest (`scenarios.parquet`, for the histories). Outputs under `out` (default
+`<run>/lerobot/`): `rollouts/` (stage 1 episodes: all or failures only, per config) and
+`pre_failure_histories/` (each released scene's episode up to its failure step), each a
+LeRobot v2.1 dataset (`pipeline.release.lerobot_format`). Frames are rendered from the
+logged states at 20 Hz (every control step), third-person and wrist cameras, right side
+up; state = eef position, eef axis-angle, the two gripper finger positions (8-D, as in
+LIBERO's LeRobot datasets); action = the 7-D command. Resumable: an episode's files are
+written before its done-marker (`<out>/_work/<dataset>/_done`); meta files come last.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import mujoco
+import numpy as np
+import pyarrow.parquet as pq
+from rich.console import Console
+from rich.progress import Progress
+
+from pipeline.atomic import Completions, write_json, write_with
+from pipeline.config import Config
+from pipeline.errors import ConfigError
+from pipeline.records import read_episodes
+from pipeline.release import lerobot_format as fmt
+from pipeline.sim import EnvCache, SimEnv, get_task
+
+
+@dataclass
+class ExportEpisode:
+    key: str  # the source (`suite/task/episode_id`, plus `@<step>` for histories)
+    suite: str
+    task: str
+    instruction: str
+    folder: Path  # stage 1 episode folder
+    length: int  # frames to export (states[:length], actions[:length])
+
+
+def axis_angle(rot: np.ndarray) -> np.ndarray:
+    q = np.empty(4)
+    mujoco.mju_mat2Quat(q, np.asarray(rot, dtype=np.float64).reshape(-1))
+    if q[0] < 0:  # same rotation, angle kept in [0, pi]
+        q = -q
+    s = np.sqrt(max(1.0 - q[0] ** 2, 0.0))
+    return np.zeros(3) if s < 1e-9 else q[1:] * (2 * np.arccos(min(q[0], 1.0)) / s)
+
+
+def render_episode(env: SimEnv, states: np.ndarray, size: int) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+    """8-D robot states and frames per LeRobot video key for each logged simulator state."""
+    robot, frames = [], {k: [] for k in fmt.VIDEO_KEYS}
+    for s in states:
+        env.set_state(s)
+        pos, rot = env.eef_pose()
+        robot.append(np.concatenate([pos, axis_angle(rot), env.gripper_qpos()]))
+        for key, cam in fmt.VIDEO_KEYS.items():
+            frames[key].append(env.render(cam, size))
+    return np.asarray(robot), {k: np.stack(v) for k, v in frames.items()}
+
+
+def write_video(path: Path, frames: np.ndarray) -> None:
+    import av
+
+    def encode(tmp: Path) -> None:
+        with av.open(str(tmp), "w", format="mp4") as box:
+            stream = box.add_stream("libx264", rate=fmt.FPS)
+            stream.width, stream.height = frames.shape[2], frames.shape[1]
+            stream.pix_fmt = "yuv420p"
+            stream.options = {"crf": "20", "g": "2"}  # short GOP: cheap random access for loaders
+            for f in frames:
+                box.mux(stream.encode(av.VideoFrame.from_ndarray(f, format="rgb24")))
+            box.mux(stream.encode())
+
+    write_with(path, encode)
+
+
+def rollout_episodes(cfg: Config) -> list[ExportEpisode]:
+    stage1 = cfg.out / "stage1"
+    out = []
+    for e in read_episodes(stage1 / "episodes.parquet"):
+        if cfg.release.lerobot_episodes == "failures" and e.success:
+            continue
+        out.append(ExportEpisode(e.key, e.suite, e.task, e.instruction, stage1 / e.path, e.steps))
+    return sorted(out, key=lambda x: x.key)
+
+
+def history_episodes(cfg: Config, manifest: Path) -> list[ExportEpisode]:
+    from pipeline.release.manifest import read_manifest
+
+    if not manifest.is_file():
+        return []
+    stage1 = cfg.out / "stage1"
+    eps = {e.key: e for e in read_episodes(stage1 / "episodes.parquet")}
+    out = []
+    for r in read_manifest(manifest):
+        e = eps.get(f"{r.suite}/{r.task}/{r.episode_id}")
+        if e is not None and r.fail_step >= 1:
+            out.append(ExportEpisode(f"{e.key}@{r.step}", r.suite, r.task, r.instruction, stage1 / e.path,
+                                     min(r.fail_step, e.steps)))
+    return sorted(out, key=lambda x: x.key)
+
+
+def export_episode(env: SimEnv, ep: ExportEpisode, i: int, start: int, task_index: int, root: Path,
+                   size: int) -> dict:
+    """Render and write episode `i`; return its episodes.jsonl/episodes_stats.jsonl entry."""
+    states = np.load(ep.folder / "states.npy")[: ep.length]
+    actions = np.array(pq.read_table(ep.folder / "steps.parquet").column("action").to_pylist())[: ep.length]
+    robot, frames = render_episode(env, states, size)
+    table = fmt.frame_table(robot, actions, i, start, task_index)
+    write_with(root / fmt.data_path(i), lambda p: pq.write_table(table, p))
+    for key, f in frames.items():
+        write_video(root / fmt.video_path(i, key), f)
+    return {"episode_index": i, "tasks": [ep.instruction], "length": ep.length, "source": ep.key,
+            "stats": fmt.episode_stats(table, frames)}
+
+
+def export_dataset(episodes: list[ExportEpisode], root: Path, work: Path, size: int, envs: EnvCache,
+                   progress: Progress) -> int:
+    """Write one v2.1 dataset (episodes grouped by task: one build each); return its frame count."""
+    done = Completions(work)
+    tasks = sorted({e.instruction for e in episodes})
+    starts = np.concatenate([[0], np.cumsum([e.length for e in episodes])]).astype(int)
+    job = progress.add_task(f"LeRobot {root.name}", total=len(episodes))
+    order = sorted(enumerate(episodes), key=lambda x: (x[1].suite, x[1].task, x[0]))
+    for i, ep in order:
+        if not done.is_done(f"{i:06d}"):
+            env = envs.get(get_task(ep.suite, ep.task))
+            meta = export_episode(env, ep, i, int(starts[i]), tasks.index(ep.instruction), root, size)
+            write_json(work / f"{i:06d}.json", meta)
+            done.mark_done(f"{i:06d}")
+        progress.advance(job)
+    metas = [json.loads((work / f"{i:06d}.json").read_text()) for i in range(len(episodes))]
+    fmt.write_meta(root, metas, tasks, size)
+    return int(starts[-1])
+
+
+def run(cfg: Config, out: Path | None = None) -> Path:
+    from pipeline.release.build import release_dir
+    from pipeline.release.manifest import MANIFEST_NAME
+
+    out = Path(out or cfg.release.lerobot_dir or cfg.out / "lerobot")
+    size = cfg.release.lerobot_image_size
+    if size % 2:
+        raise ConfigError(f"release.lerobot_image_size must be even for yuv420p video, got {size}")
+    datasets = {"rollouts": rollout_episodes(cfg),
+                "pre_failure_histories": history_episodes(cfg, release_dir(cfg) / MANIFEST_NAME)}
+    console = Console()
+    with Progress(console=console, transient=True) as progress, EnvCache(capacity=1) as envs:
+        for name, episodes in datasets.items():
+            frames = export_dataset(episodes, out / name, out / "_work" / name, size, envs, progress)
+            console.print(f"[green]{name}[/green]: {len(episodes)} episode(s), {frames} frames -> {out / name}")
+    return out

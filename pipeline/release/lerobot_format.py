@@ -1,0 +1,138 @@
+"""The LeRobot v2.1 on-disk format: paths, feature declarations, stats, metadata files.
+
+Pure formatting, no simulator: `pipeline.release.lerobot_export` renders the frames and
+calls these. Layout (one dataset folder):
+    data/chunk-000/episode_000000.parquet            one row per frame (20 Hz)
+    videos/chunk-000/<video key>/episode_000000.mp4  one file per camera and episode
+    meta/info.json, meta/episodes.jsonl, meta/episodes_stats.jsonl, meta/tasks.jsonl
+    meta/stats.json                                  dataset-wide stats (older v2.x readers want it)
+Invariants: episode i lives in chunk i // CHUNKS_SIZE; `index` runs over the whole dataset;
+per-episode stats hold min/max/mean/std/count for every feature (images per channel in
+[0, 1], shaped (3, 1, 1)), as LeRobot's own writer computes them.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+
+from pipeline.atomic import write_text
+
+CODEBASE_VERSION = "v2.1"
+CHUNKS_SIZE = 1000
+FPS = 20
+DATA_PATH = "data/chunk-{episode_chunk:03d}/episode_{episode_index:06d}.parquet"
+VIDEO_PATH = "videos/chunk-{episode_chunk:03d}/{video_key}/episode_{episode_index:06d}.mp4"
+# LeRobot key -> our camera; the names of LIBERO's own LeRobot datasets
+VIDEO_KEYS = {"observation.images.image": "agentview", "observation.images.wrist_image": "robot0_eye_in_hand"}
+STATE_NAMES = ["x", "y", "z", "axis_angle1", "axis_angle2", "axis_angle3", "gripper_left", "gripper_right"]
+ACTION_NAMES = ["dx", "dy", "dz", "droll", "dpitch", "dyaw", "gripper"]
+
+
+def data_path(ep: int) -> str:
+    return DATA_PATH.format(episode_chunk=ep // CHUNKS_SIZE, episode_index=ep)
+
+
+def video_path(ep: int, key: str) -> str:
+    return VIDEO_PATH.format(episode_chunk=ep // CHUNKS_SIZE, video_key=key, episode_index=ep)
+
+
+def features(size: int) -> dict:
+    video_info = {"video.fps": float(FPS), "video.height": size, "video.width": size, "video.channels": 3,
+                  "video.codec": "h264", "video.pix_fmt": "yuv420p", "video.is_depth_map": False, "has_audio": False}
+    out = {k: {"dtype": "video", "shape": [size, size, 3], "names": ["height", "width", "channel"], "info": video_info}
+           for k in VIDEO_KEYS}
+    out["observation.state"] = {"dtype": "float32", "shape": [8], "names": STATE_NAMES}
+    out["action"] = {"dtype": "float32", "shape": [7], "names": ACTION_NAMES}
+    for k in ("timestamp",):
+        out[k] = {"dtype": "float32", "shape": [1], "names": None}
+    for k in ("frame_index", "episode_index", "index", "task_index"):
+        out[k] = {"dtype": "int64", "shape": [1], "names": None}
+    return out
+
+
+def frame_table(states: np.ndarray, actions: np.ndarray, ep: int, start: int, task_index: int) -> pa.Table:
+    n = len(states)
+
+    def fixed(a: np.ndarray) -> pa.FixedSizeListArray:
+        a = np.asarray(a, dtype=np.float32)
+        return pa.FixedSizeListArray.from_arrays(pa.array(a.reshape(-1), pa.float32()), a.shape[1])
+
+    return pa.table({
+        "observation.state": fixed(states),
+        "action": fixed(actions),
+        "timestamp": pa.array(np.arange(n, dtype=np.float32) / FPS, pa.float32()),
+        "frame_index": pa.array(np.arange(n), pa.int64()),
+        "episode_index": pa.array(np.full(n, ep), pa.int64()),
+        "index": pa.array(np.arange(start, start + n), pa.int64()),
+        "task_index": pa.array(np.full(n, task_index), pa.int64()),
+    })
+
+
+def _stats(x: np.ndarray) -> dict:
+    x = np.asarray(x, dtype=np.float64)
+    x = x.reshape(len(x), -1) if x.ndim > 1 else x.reshape(-1, 1)
+    return {"min": x.min(0).tolist(), "max": x.max(0).tolist(), "mean": x.mean(0).tolist(),
+            "std": x.std(0).tolist(), "count": [int(len(x))]}
+
+
+def image_stats(frames: np.ndarray) -> dict:
+    """Per-channel stats of (n, H, W, 3) uint8 frames in [0, 1], shaped (3, 1, 1)."""
+    x = frames.astype(np.float64) / 255.0
+    per = {"min": x.min((0, 1, 2)), "max": x.max((0, 1, 2)), "mean": x.mean((0, 1, 2)), "std": x.std((0, 1, 2))}
+    out = {k: v.reshape(3, 1, 1).tolist() for k, v in per.items()}
+    out["count"] = [int(len(frames))]
+    return out
+
+
+def episode_stats(table: pa.Table, images: dict[str, np.ndarray]) -> dict:
+    out = {k: image_stats(v) for k, v in images.items()}
+    for name in table.column_names:
+        col = table.column(name)
+        arr = np.array(col.to_pylist()) if pa.types.is_fixed_size_list(col.type) else col.to_numpy()
+        out[name] = _stats(arr)
+    return out
+
+
+def aggregate_stats(per_episode: list[dict]) -> dict:
+    """Dataset-wide stats (meta/stats.json) from per-episode ones: count-weighted mean, pooled std."""
+    out = {}
+    for key in per_episode[0] if per_episode else []:
+        parts = [e[key] for e in per_episode]
+        n = np.array([p["count"][0] for p in parts], dtype=np.float64)
+        mean = np.array([p["mean"] for p in parts])
+        var = np.array([p["std"] for p in parts]) ** 2
+        w = (n / n.sum()).reshape((-1,) + (1,) * (mean.ndim - 1))
+        total_mean = (w * mean).sum(0)
+        total_var = (w * (var + (mean - total_mean) ** 2)).sum(0)
+        out[key] = {"min": np.min([p["min"] for p in parts], axis=0).tolist(),
+                    "max": np.max([p["max"] for p in parts], axis=0).tolist(),
+                    "mean": total_mean.tolist(), "std": np.sqrt(total_var).tolist(), "count": [int(n.sum())]}
+    return out
+
+
+def _jsonl(rows: list[dict]) -> str:
+    return "".join(json.dumps(r) + "\n" for r in rows)
+
+
+def write_meta(root: Path, episodes: list[dict], tasks: list[str], size: int, robot_type: str = "panda") -> None:
+    """`episodes`: dicts with episode_index, tasks, length, stats (sorted by index)."""
+    total_frames = sum(e["length"] for e in episodes)
+    info = {
+        "codebase_version": CODEBASE_VERSION, "robot_type": robot_type,
+        "total_episodes": len(episodes), "total_frames": total_frames, "total_tasks": len(tasks),
+        "total_videos": len(episodes) * len(VIDEO_KEYS),
+        "total_chunks": (max((e["episode_index"] for e in episodes), default=-1) // CHUNKS_SIZE) + 1,
+        "chunks_size": CHUNKS_SIZE, "fps": FPS, "splits": {"train": f"0:{len(episodes)}"},
+        "data_path": DATA_PATH, "video_path": VIDEO_PATH, "features": features(size),
+    }
+    write_text(root / "meta" / "info.json", json.dumps(info, indent=4) + "\n")
+    write_text(root / "meta" / "tasks.jsonl", _jsonl([{"task_index": i, "task": t} for i, t in enumerate(tasks)]))
+    write_text(root / "meta" / "episodes.jsonl", _jsonl(
+        [{"episode_index": e["episode_index"], "tasks": e["tasks"], "length": e["length"]} for e in episodes]))
+    write_text(root / "meta" / "stats.json", json.dumps(aggregate_stats([e["stats"] for e in episodes]), indent=4) + "\n")
+    write_text(root / "meta" / "episodes_stats.jsonl", _jsonl(
+        [{"episode_index": e["episode_index"], "stats": e["stats"]} for e in episodes]))

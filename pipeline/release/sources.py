@@ -1,0 +1,85 @@
+"""Gather what a release is made of: final reviewed annotations joined with their scenes.
+
+Inputs (run folder): `stage3/annotations/<suite>/<task>/episode_<id>.json` (`records.Annotation`:
+final reviewed annotations, the review export), `stage2/localizations/<suite>/<task>/<episode_id>.json`
+(`Localization`, with the stage-2-relative paths of the scene pair and history), and
+`stage1/episodes.parquet` (`EpisodeRecord`: policy, seed, init state).
+Output: `ReleaseItem`s sorted by key, and `QuarantineEntry`s for annotations that cannot be
+released (unreadable, or a missing localization, episode or scene file), with the reason.
+Only annotations are released: an episode without a final annotation never appears.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+from pydantic import ValidationError
+
+from pipeline.records import Annotation, EpisodeRecord, Localization, QuarantineEntry, read_episodes
+
+
+@dataclass
+class ReleaseItem:
+    annotation: Annotation
+    localization: Localization
+    episode: EpisodeRecord
+    scene_bddl: Path  # absolute, in the run's stage2 folder
+    scene_state: Path
+    history: Path | None
+    step: int
+
+    @property
+    def suite(self) -> str:
+        return self.episode.suite
+
+
+def _step_of(bddl: Path, fallback: int) -> int:
+    m = re.fullmatch(r"step_(\d+)\.bddl", bddl.name)
+    return int(m.group(1)) if m else fallback
+
+
+def gather(run_dir: Path) -> tuple[list[ReleaseItem], list[QuarantineEntry]]:
+    stage1, stage2 = run_dir / "stage1", run_dir / "stage2"
+    ann_root = run_dir / "stage3" / "annotations"
+    episodes_file = stage1 / "episodes.parquet"
+    episodes = {e.key: e for e in read_episodes(episodes_file)} if episodes_file.exists() else {}
+    items, skipped = [], []
+
+    def skip(key: str, reason: str, detail: str) -> None:
+        skipped.append(QuarantineEntry(key=key, stage="release", source="review_export", reason=reason, detail=detail))
+
+    for path in sorted(ann_root.glob("*/*/episode_*.json")):
+        rel = path.relative_to(run_dir)
+        try:
+            ann = Annotation.model_validate(json.loads(path.read_text()))
+        except (OSError, json.JSONDecodeError, ValidationError) as e:
+            skip(str(rel), "schema", f"{path}: {e}")
+            continue
+        suite, task, ep_id = ann.suite, ann.task, ann.episode_id
+        loc_path = stage2 / "localizations" / suite / task / f"{ep_id}.json"
+        if not loc_path.is_file():
+            skip(ann.key, "no_localization", f"{loc_path} missing (annotation {path})")
+            continue
+        try:
+            loc = Localization.model_validate_json(loc_path.read_text())
+        except (OSError, ValidationError) as e:
+            skip(ann.key, "schema", f"{loc_path}: {e}")
+            continue
+        ep = episodes.get(ann.key)
+        if ep is None:
+            skip(ann.key, "no_episode", f"{episodes_file} has no episode {ann.key}")
+            continue
+        # the annotation names the snapshot its reviewers saw; older exports leave it to stage 2
+        bddl = stage2 / (ann.scene_bddl or loc.scene_bddl)
+        state = stage2 / (ann.scene_state or loc.scene_state)
+        history = stage2 / loc.history if loc.history else None
+        missing = [str(p) for p in (bddl, state, history) if p is not None and not p.exists()]
+        if missing:
+            skip(ann.key, "missing_scene_file", ", ".join(missing))
+            continue
+        items.append(ReleaseItem(ann, loc, ep, bddl, state, history, _step_of(bddl, loc.fail_step)))
+    items.sort(key=lambda it: (it.episode.suite, it.episode.task, it.episode.episode_id))
+    return items, skipped

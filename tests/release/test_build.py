@@ -1,0 +1,81 @@
+"""`recover release`: layout, manifest, card, determinism, quarantine, stale files."""
+
+from __future__ import annotations
+
+import shutil
+import subprocess
+from pathlib import Path
+
+import pytest
+
+from pipeline.release.build import build
+from pipeline.release.manifest import MANIFEST_NAME, read_manifest
+from tests.release.factories import make_run, npy_bytes, release_config
+
+pytestmark = pytest.mark.sim  # the scene source is a real episode
+
+
+@pytest.fixture()
+def run(tmp_path, scene_source) -> Path:
+    good = npy_bytes(scene_source.failure)
+    return make_run(tmp_path / "run", scene_source, {"ep-a": (good, scene_source.bddl_text),
+                                                     "ep-b": (good, scene_source.bddl_text)})
+
+
+def test_release_lays_out_scene_pairs_history_manifest_and_card(run):
+    rows = build(release_config(run))
+    out = run / "release"
+    assert [r.episode_id for r in rows] == ["ep-a", "ep-b"]
+    r = rows[0]
+    assert r.bddl_path == (f"selected_bddl_scenes_libero_spatial/{r.task}/episode_ep-a/step_{r.step:04d}.bddl")
+    assert r.state_path == r.bddl_path.removesuffix(".bddl") + "_sim_state.npy"
+    assert r.history_paths == [r.bddl_path.removesuffix(".bddl") + "_history.npy"]
+    assert (r.level, r.category, r.reviewers, r.policy, r.state_dim) == ("L2", "grasp_failure", 2, "scripted", 92)
+    assert r.characterize_prompt_hash == "c0ffee01" and r.certified is None
+    assert read_manifest(out / MANIFEST_NAME) == rows
+    card = (out / "README.md").read_text()
+    assert "| libero_spatial | 0 | 2 | 0 | 0 | 2 |" in card
+    assert "| grasp_failure | 2 |" in card and "reviewers: 2 distinct people" in card
+    assert (out / "figures/scenes_by_suite_level.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    check = subprocess.run(["sha256sum", "-c", "--quiet", "SHA256SUMS"], cwd=out, capture_output=True, text=True)
+    assert check.returncode == 0, check.stdout + check.stderr
+    assert len((out / "SHA256SUMS").read_text().splitlines()) == 2 * 3 + 3
+
+
+def test_release_bytes_do_not_depend_on_where_or_when_it_was_built(run, tmp_path):
+    build(release_config(run))
+    elsewhere = tmp_path / "copied" / "somewhere" / "else"
+    shutil.copytree(run, elsewhere, ignore=shutil.ignore_patterns("release"))
+    build(release_config(elsewhere))
+    first, second = run / "release", elsewhere / "release"
+    assert (first / "SHA256SUMS").read_text() == (second / "SHA256SUMS").read_text()
+    for line in (first / "SHA256SUMS").read_text().splitlines():
+        rel = line.split("  ", 1)[1]
+        assert (first / rel).read_bytes() == (second / rel).read_bytes(), rel
+    assert str(tmp_path) not in (second / "README.md").read_text()
+
+
+def test_release_sets_aside_an_annotation_without_localization(run):
+    loc = next((run / "stage2" / "localizations").rglob("ep-b.json"))
+    loc.unlink()
+    rows = build(release_config(run))
+    assert [r.episode_id for r in rows] == ["ep-a"]
+    quarantine = (run / "release" / "_build" / "quarantine.jsonl").read_text().splitlines()
+    assert len(quarantine) == 1 and '"reason":"no_localization"' in quarantine[0] and "ep-b.json" in quarantine[0]
+
+
+def test_release_rebuild_removes_files_of_scenes_no_longer_released(run):
+    rows = build(release_config(run))
+    gone = run / "release" / rows[1].state_path
+    assert gone.is_file()
+    next((run / "stage3" / "annotations").rglob("episode_ep-b.json")).unlink()
+    build(release_config(run))
+    assert not gone.exists() and not gone.parent.exists()
+    assert [r.episode_id for r in read_manifest(run / "release" / MANIFEST_NAME)] == ["ep-a"]
+
+
+def test_release_never_includes_episodes_without_a_final_annotation(run):
+    for f in (run / "stage3" / "annotations").rglob("*.json"):
+        f.unlink()
+    assert build(release_config(run)) == []
+    assert not list((run / "release").glob("selected_bddl_scenes_*/**/*.npy"))

@@ -1,0 +1,133 @@
+"""`recover verify`: every corruption is caught, with a message naming the file.
+
+One release holds one scene per corruption (all of one task), so the whole module builds
+the task's environment twice: once for the fixture episode, once for verify.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from pipeline.release.build import build
+from pipeline.release.manifest import MANIFEST_NAME, read_manifest, sha256_file, write_manifest
+from pipeline.release.verify import main, verify_release
+
+from tests.release.factories import make_run, npy_bytes, release_config
+
+pytestmark = pytest.mark.sim
+
+BOWLS_ONE_LINE = "akita_black_bowl_1 akita_black_bowl_2 - akita_black_bowl"
+BOWLS_TWO_LINES = "akita_black_bowl_1 - akita_black_bowl\n    akita_black_bowl_2 - akita_black_bowl"
+
+
+def _rehash(out: Path) -> None:
+    """Make the manifest agree with the files again (a corrupted copy that was re-hashed)."""
+    rows = [r.model_copy(update={"bddl_sha256": sha256_file(out / r.bddl_path),
+                                 "state_sha256": sha256_file(out / r.state_path)}) for r in read_manifest(out / MANIFEST_NAME)]
+    write_manifest(out / MANIFEST_NAME, rows)
+
+
+@pytest.fixture(scope="module")
+def checked(tmp_path_factory, scene_source):
+    src = scene_source
+    good = npy_bytes(src.failure)
+    episodes = ["good", "truncated", "short", "syntax", "split", "solved", "tampered"]
+    scenes = {ep: (npy_bytes(src.satisfied) if ep == "solved" else good, src.bddl_text) for ep in episodes}
+    run = make_run(tmp_path_factory.mktemp("run"), src, scenes)
+    cfg = release_config(run)
+    rows = {r.episode_id: r for r in build(cfg)}
+    out = run / "release"
+    assert BOWLS_ONE_LINE in src.bddl_text
+    (out / rows["truncated"].state_path).write_bytes(good[: len(good) // 2])
+    (out / rows["short"].state_path).write_bytes(npy_bytes(src.failure[:-3]))
+    (out / rows["syntax"].bddl_path).write_text(src.bddl_text.rstrip().removesuffix(")"))
+    (out / rows["split"].bddl_path).write_text(src.bddl_text.replace(BOWLS_ONE_LINE, BOWLS_TWO_LINES))
+    _rehash(out)
+    # tampered after hashing: the manifest keeps the original checksum of the history
+    history = out / rows["tampered"].history_paths[0]
+    data = bytearray(history.read_bytes())
+    data[-1] ^= 0xFF
+    history.write_bytes(bytes(data))
+    reports, set_problems = verify_release(out, cfg.release)
+    by_episode = {r.scene.split("/")[2].removeprefix("episode_"): r for r in reports}
+    return out, by_episode, set_problems
+
+
+def _problems(checked, episode: str) -> list[str]:
+    return checked[1][episode].problems
+
+
+def _scene_file(checked, episode: str, suffix: str) -> str:
+    out = checked[0]
+    return str(next((out / "selected_bddl_scenes_libero_spatial").rglob(f"episode_{episode}/*{suffix}")))
+
+
+def test_verify_passes_an_untouched_scene(checked):
+    assert _problems(checked, "good") == []
+    assert all(checked[1]["good"].checks.values())
+    assert checked[2] == []
+
+
+def test_verify_reports_a_truncated_npy_naming_the_file(checked):
+    (msg,) = _problems(checked, "truncated")
+    assert msg.startswith(_scene_file(checked, "truncated", "_sim_state.npy"))
+    assert "cannot load state" in msg
+
+
+def test_verify_rejects_a_state_of_the_wrong_length(checked):
+    (msg,) = _problems(checked, "short")
+    assert msg.startswith(_scene_file(checked, "short", "_sim_state.npy"))
+    assert "state_dim" in msg and str(checked[1]["good"].checks) and "length" in msg
+
+
+def test_verify_rejects_a_bddl_syntax_error(checked):
+    (msg,) = _problems(checked, "syntax")
+    assert msg.startswith(_scene_file(checked, "syntax", ".bddl"))
+    assert "parser failed" in msg and "parenthesis" in msg
+
+
+def test_verify_rejects_same_type_objects_on_separate_lines(checked):
+    (msg,) = _problems(checked, "split")
+    assert msg.startswith(_scene_file(checked, "split", ".bddl"))
+    assert "'akita_black_bowl'" in msg and "one line" in msg
+
+
+def test_verify_rejects_a_scene_whose_goal_already_holds(checked):
+    msgs = _problems(checked, "solved")
+    assert any(m.startswith(_scene_file(checked, "solved", "_sim_state.npy")) and "goal" in m for m in msgs)
+    assert checked[1]["solved"].checks["goal"] is False
+
+
+def test_verify_detects_a_checksum_mismatch(checked):
+    (msg,) = _problems(checked, "tampered")
+    assert msg.startswith(_scene_file(checked, "tampered", "_history.npy"))
+    assert "SHA-256" in msg and "does not match" in msg
+
+
+def test_verify_flags_a_stray_scene_file_and_exits_nonzero(checked, capsys):
+    out = checked[0]
+    stray = out / "selected_bddl_scenes_libero_spatial" / "extra.bddl"
+    stray.write_text("(define)")
+    try:
+        reports, set_problems = verify_release(out)
+        assert set_problems == [f"{stray}: scene file not listed in the manifest"]
+    finally:
+        stray.unlink()
+
+
+def test_verify_main_exits_nonzero_and_prints_every_problem(checked, capsys, monkeypatch):
+    import pipeline.release.verify as verify
+
+    # reuse the module's results instead of rebuilding the environment
+    monkeypatch.setattr(verify, "verify_release", lambda d, cfg=None: (list(checked[1].values()), checked[2]))
+    assert main(checked[0]) == 1
+    text = capsys.readouterr().out
+    assert "1/7 scenes pass" in text
+    assert text.count("problem") >= 6
+
+
+def test_verify_reports_a_missing_manifest(tmp_path: Path):
+    reports, set_problems = verify_release(tmp_path)
+    assert reports == [] and set_problems == [f"{tmp_path / 'scenarios.parquet'}: manifest missing"]
