@@ -21,7 +21,7 @@ from __future__ import annotations
 from enum import Enum
 
 import pyarrow as pa
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from pipeline import SCHEMA_VERSION
 
@@ -214,11 +214,23 @@ class Localization(Record):
     fail_time_s: float
     fail_step: int
     phases: Phases
+    # the scene is the first settled state at or after the onset (== fail_step when the
+    # scene is already calm there): a falling or sliding object is no restorable scene.
+    # Records written before this field existed snapshot the onset itself.
+    scene_step: int | None = None
     scene_bddl: str  # relative to the stage2 folder
     scene_state: str
     history: str | None = None
     events: list[SimEvent] = Field(default_factory=list)
     simstate_time_s: float | None = None  # the simstate localizer's onset, when run beside a VLM
+
+    @model_validator(mode="after")
+    def _scene_step_defaults_to_onset(self) -> Localization:
+        if self.scene_step is None:
+            self.scene_step = self.fail_step
+        elif self.scene_step < self.fail_step:
+            raise ValueError(f"scene_step {self.scene_step} is before the onset fail_step {self.fail_step}")
+        return self
     evidence: str | None = None  # per-step evidence parquet, relative to the stage2 folder
 
 

@@ -8,8 +8,10 @@ history + Localization JSON, OR a QuarantineEntry JSON saying why. Returns an `O
 The onset comes from the VLM when one ran (its time mapped to a step through stage 1's
 frame table), else from the simstate rules; simstate always runs, and its time is kept
 beside the VLM's (`simstate_time_s`) for the agreement report.
+The scene pair is written at the first settled step at or after the onset (see
+`phases.settled_step`); the history is the window before the onset.
 Quarantine reasons from here: no_failure_found (simstate saw no event; carries the idle
-fallback step), goal_satisfied_at_onset, bddl_*, state_shape, stage1_* (bad inputs), and a
+fallback step), not_settled (objects never calm again), goal_satisfied_at_onset, bddl_*, state_shape, stage1_* (bad inputs), and a
 VLM parse/backend reason (truncated, no_json, schema, out_of_range, backend_error, ...).
 """
 
@@ -27,7 +29,7 @@ from pipeline.evidence import compute_evidence, write_evidence
 from pipeline.records import EpisodeRecord, Localization, QuarantineEntry
 from pipeline.stage2.history import build_history, write_history
 from pipeline.stage2.layout import Stage2Paths, load_episode
-from pipeline.stage2.phases import split_phases, step_for_time
+from pipeline.stage2.phases import settled_step, split_phases, step_for_time
 from pipeline.stage2.scenes import scene_stem, write_scene
 from pipeline.stage2.simstate import localize
 
@@ -85,20 +87,27 @@ def process_episode(env, rec: EpisodeRecord, stage1: Path, paths: Stage2Paths, c
                           f"({fb / rec.control_hz:.1f} s), a fallback onset for review",
                           fallback_step=fb, fallback_time_s=fb / rec.control_hz)
     onset = min(onset, rec.steps)
+    scene_step = settled_step(ev, onset, cfg.settle_speed_mps, cfg.settle_steps)
+    if scene_step is None:
+        return quarantine("not_settled", f"objects never stayed below {cfg.settle_speed_mps} m/s for "
+                          f"{cfg.settle_steps} steps after the onset (step {onset}): no restorable scene")
     try:
-        bddl, npy = write_scene(paths.root, env, rec.suite, rec.task, rec.episode_id, onset, ep.states[onset])
+        bddl, npy = write_scene(paths.root, env, rec.suite, rec.task, rec.episode_id, scene_step,
+                                ep.states[scene_step])
     except EpisodeError as e:
         return quarantine(e.reason, e.detail)
     history_rel = None
     if cfg.history_frames > 0:
-        hist = build_history(env, ep.states, ep.steps, onset, cfg.history_frames, cfg.history_stride_steps,
-                             list(cfg.history_cameras), cfg.history_resolution, rec.control_hz)
-        hist_path = bddl.parent / f"{scene_stem(onset)}_history.npz"
+        hist, frames = build_history(env, ep.states, ep.steps, onset, cfg.history_frames,
+                                     cfg.history_stride_steps, list(cfg.history_cameras),
+                                     cfg.history_resolution, rec.control_hz)
+        hist_path = bddl.parent / f"{scene_stem(scene_step)}_history.npz"
         write_history(hist_path, hist)
+        write_history(bddl.parent / f"{scene_stem(scene_step)}_history_frames.npz", frames)
         history_rel = str(hist_path.relative_to(paths.root))
     loc = Localization(
         key=rec.key, suite=rec.suite, task=rec.task, episode_id=rec.episode_id, instruction=rec.instruction,
-        source=source, **trace, fail_step=onset,
+        source=source, **trace, fail_step=onset, scene_step=scene_step,
         fail_time_s=float(vlm["fail_time_s"]) if vlm else round(onset / rec.control_hz, 3),
         phases=split_phases(ev, onset, cfg.settle_speed_mps, cfg.settle_steps),
         scene_bddl=str(bddl.relative_to(paths.root)), scene_state=str(npy.relative_to(paths.root)),

@@ -1,16 +1,20 @@
-"""The pre-failure temporal history saved beside a scene (`step_<NNNN>_history.npz`).
+"""The pre-failure temporal history saved beside a scene.
 
 Inputs: the task's built env, the episode's states (row t = state before action t), its
-step log (STEP_SCHEMA rows) and the onset. Output: one compressed npz with the `window`
-observations before the onset, every `stride`-th step ending at onset - 1, oldest first:
+step log (STEP_SCHEMA rows) and the onset. Outputs: two compressed npz files covering the
+`window` observations before the onset, every `stride`-th step ending at onset - 1, oldest
+first. `step_<NNNN>_history.npz` holds what is exactly reproducible (released, checksummed):
     steps          (k,) int32            the simulator steps (k <= window; fewer near the start)
     time_s         (k,) float64
-    <camera>       (k, S, S, 3) uint8    frames rendered from the logged states, right side up
     eef_pos        (k, 3) float32        robot state at those steps (from steps.parquet)
     eef_quat       (k, 4) float32        w, x, y, z
     gripper_qpos   (k, 2) float32
     actions        (k, 7) float32        the action the policy applied at that step
     sim_states     (k, state_dim) float64
+`step_<NNNN>_history_frames.npz` holds `steps` and one (k, S, S, 3) uint8 array per camera,
+rendered from `sim_states`, right side up. It is kept apart because software rendering is
+not bit-identical across processes (measured: ~14% of pixels differ on textured fixtures),
+so it cannot be part of a byte-reproducible release; anyone can re-render it from the states.
 Invariant: the onset state itself is not part of the history (it is the scene).
 """
 
@@ -28,7 +32,9 @@ def history_steps(onset: int, window: int, stride: int) -> list[int]:
 
 
 def build_history(env, states: np.ndarray, step_rows: dict[str, np.ndarray], onset: int, window: int,
-                  stride: int, cameras: list[str], size: int, control_hz: int = 20) -> dict[str, np.ndarray]:
+                  stride: int, cameras: list[str], size: int,
+                  control_hz: int = 20) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """The reproducible history and its rendered frames (see the module docstring)."""
     steps = history_steps(onset, window, stride)
     out: dict[str, np.ndarray] = {
         "steps": np.asarray(steps, dtype=np.int32),
@@ -39,13 +45,20 @@ def build_history(env, states: np.ndarray, step_rows: dict[str, np.ndarray], ons
         col = step_rows[name]
         key = "actions" if name == "action" else name
         out[key] = np.asarray(col[steps], dtype=np.float32).reshape(len(steps), width)
-    frames = {cam: [] for cam in cameras}
-    for s in steps:
-        env.set_state(states[s])
+    return out, render_frames(env, out, cameras, size)
+
+
+def render_frames(env, history: dict[str, np.ndarray], cameras: list[str], size: int) -> dict[str, np.ndarray]:
+    """Frames of a history's states, one (k, S, S, 3) array per camera (plus `steps`)."""
+    frames: dict[str, list] = {cam: [] for cam in cameras}
+    for state in history["sim_states"]:
+        env.set_state(state)
         for cam in cameras:
             frames[cam].append(env.render(cam, size))
+    k = len(history["sim_states"])
+    out = {"steps": history["steps"]}
     for cam in cameras:
-        out[cam] = np.asarray(frames[cam], dtype=np.uint8).reshape(len(steps), size, size, 3)
+        out[cam] = np.asarray(frames[cam], dtype=np.uint8).reshape(k, size, size, 3)
     return out
 
 

@@ -12,6 +12,7 @@ where `end` is the earlier of
   - the robot stops the original attempt: the gripper command flips away from its value at
     the onset and holds the new value for `MIN_FLIP_STEPS` steps (a re-grasp, a release);
 and never before onset + 1, never after steps + 1.
+The scene snapshot is taken at `settled_step`: the start of that first calm window.
 Also: seconds <-> steps through stage 1's frame table (`step_for_time`).
 """
 
@@ -35,6 +36,14 @@ def stable_end(ev: Evidence, onset: int, speed_mps: float, settle_steps: int) ->
         if run >= settle_steps:
             return t + 1
     return None
+
+
+def settled_step(ev: Evidence, onset: int, speed_mps: float, settle_steps: int) -> int | None:
+    """The first step at or after the onset from which every object stays calm for
+    `settle_steps` steps: the failure state a recovery starts from. At the onset itself
+    objects may still be falling or sliding, which no one can restore as a fixed scene."""
+    end = stable_end(ev, onset, speed_mps, settle_steps)
+    return None if end is None else end - settle_steps
 
 
 def attempt_end(ev: Evidence, onset: int) -> int | None:

@@ -13,8 +13,9 @@ Output layout, under `<run.output_dir>/stage2/`:
     vlm/<suite>/<task>/<episode_id>.json               the VLM's stored answer (VLM backends only)
     selected_bddl_scenes_<suite>/<task>/episode_<episode_id>/
         step_<NNNN>.bddl                               the task's BDDL, one declaration line per type
-        step_<NNNN>_sim_state.npy                      flattened MuJoCo state at the onset
-        step_<NNNN>_history.npz                        pre-failure window (pipeline/stage2/history.py)
+        step_<NNNN>_sim_state.npy                      flattened MuJoCo state, first settled step >= onset
+        step_<NNNN>_history.npz                        pre-failure window: states, robot, actions
+        step_<NNNN>_history_frames.npz                 its rendered frames (not byte-reproducible)
     localizations.parquet                              all Localizations, compiled
     agreement.json, agreement.png                      VLM vs simstate (when a VLM ran)
     summary.json

@@ -80,15 +80,11 @@ def test_two_runs_from_scratch_give_byte_identical_scene_pairs(smoke):
     assert pairs and not [p for p in pairs if p in diffs], diffs
 
 
-@pytest.mark.xfail(strict=True, reason="stage 2 histories hold EGL-rendered frames, which differ between "
-                   "processes in textured regions (same state, same model); see the release report")
 def test_two_runs_from_scratch_give_identical_checksums_for_every_file(smoke):
     assert compare(smoke["stored"], smoke["rebuilt"]) == [], smoke["reproduce"].stdout[-3000:]
     assert smoke["reproduce"].returncode == 0 and "byte-identical" in smoke["reproduce"].stdout
 
 
-@pytest.mark.xfail(strict=True, reason="stage 2 snapshots the failure onset, where objects may still move, "
-                   "not the settled post-failure state; see the release report")
 def test_the_smoke_release_passes_verify(smoke):
     assert smoke["verify"].returncode == 0, smoke["verify"].stdout[-3000:]
 

@@ -23,13 +23,16 @@ def test_every_scene_rebuilds_from_its_bddl_restores_from_its_npy_and_is_unfinis
     for loc in locs:
         bddl = stage2_run / "stage2" / loc.scene_bddl
         state = np.load(stage2_run / "stage2" / loc.scene_state)
-        assert bddl.name == f"step_{loc.fail_step:04d}.bddl"
-        assert bddl.with_name(f"step_{loc.fail_step:04d}_sim_state.npy").exists()
+        # the scene is the first settled state at or after the onset
+        assert loc.scene_step >= loc.fail_step
+        assert bddl.name == f"step_{loc.scene_step:04d}.bddl"
+        assert bddl.with_name(f"step_{loc.scene_step:04d}_sim_state.npy").exists()
         spec = get_task(loc.suite, loc.task).model_copy(update={"bddl_path": bddl})
         with SimEnv(spec) as env:  # LIBERO builds the scene from the scene's own BDDL
             env.reset_to(state)
             np.testing.assert_allclose(env.get_state()[1:], state[1:], atol=1e-9)
             assert not env.goal_satisfied(), loc.key
+            assert max(env.object_speeds().values()) < 0.01, f"{loc.key}: objects still moving in the scene"
 
 
 def test_a_state_where_the_goal_holds_is_refused_as_a_scene(spatial_env, stage1_run, episodes, tmp_path):
