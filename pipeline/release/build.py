@@ -98,7 +98,7 @@ def build(cfg: Config, console: Console | None = None) -> list[ScenarioRow]:
 
     console = console or Console()
     out = release_dir(cfg)
-    items, skipped = gather(cfg.out)
+    items, skipped = gather(cfg.out, cfg.stage2)
     rows = []
     for item in items:
         try:  # a state that does not load is set aside here; verify checks the rest

@@ -4,7 +4,8 @@ Inputs (run folder): `stage3/annotations/<suite>/<task>/episode_<id>.json` (`rec
 final reviewed annotations, the review export), `stage2/localizations/<suite>/<task>/<episode_id>.json`
 (`Localization`, with the stage-2-relative paths of the scene pair and history), and
 `stage1/episodes.parquet` (`EpisodeRecord`: policy, seed, init state).
-Output: `ReleaseItem`s sorted by key, and `QuarantineEntry`s for annotations that cannot be
+When reviewers moved the failure onset, the scene is taken again at the reviewed time
+(`resnapshot.py`). Output: `ReleaseItem`s sorted by key, and `QuarantineEntry`s for annotations that cannot be
 released (unreadable, or a missing localization, episode or scene file), with the reason.
 Only annotations are released: an episode without a final annotation never appears.
 """
@@ -18,7 +19,10 @@ from pathlib import Path
 
 from pydantic import ValidationError
 
+from pipeline.config import Stage2Config
+from pipeline.errors import EpisodeError
 from pipeline.records import Annotation, EpisodeRecord, Localization, QuarantineEntry, read_episodes
+from pipeline.release.resnapshot import needs_resnapshot, resnapshot
 
 
 @dataclass
@@ -41,7 +45,8 @@ def _step_of(bddl: Path, fallback: int) -> int:
     return int(m.group(1)) if m else fallback
 
 
-def gather(run_dir: Path) -> tuple[list[ReleaseItem], list[QuarantineEntry]]:
+def gather(run_dir: Path, stage2_cfg: Stage2Config | None = None) -> tuple[list[ReleaseItem], list[QuarantineEntry]]:
+    """`stage2_cfg` (settle rules, history window) enables re-snapshots at reviewed onsets."""
     stage1, stage2 = run_dir / "stage1", run_dir / "stage2"
     ann_root = run_dir / "stage3" / "annotations"
     episodes_file = stage1 / "episodes.parquet"
@@ -72,10 +77,17 @@ def gather(run_dir: Path) -> tuple[list[ReleaseItem], list[QuarantineEntry]]:
         if ep is None:
             skip(ann.key, "no_episode", f"{episodes_file} has no episode {ann.key}")
             continue
-        # the annotation names the snapshot its reviewers saw; older exports leave it to stage 2
-        bddl = stage2 / (ann.scene_bddl or loc.scene_bddl)
-        state = stage2 / (ann.scene_state or loc.scene_state)
-        history = stage2 / loc.history if loc.history else None
+        if stage2_cfg is not None and needs_resnapshot(ann, loc):
+            try:  # reviewers moved the onset: the scene is taken again at the reviewed time
+                bddl, state, history = resnapshot(run_dir, ann, loc, ep, stage2_cfg)
+            except EpisodeError as e:
+                skip(ann.key, e.reason, e.detail)
+                continue
+        else:
+            # the annotation names the snapshot its reviewers saw; older exports leave it to stage 2
+            bddl = stage2 / (ann.scene_bddl or loc.scene_bddl)
+            state = stage2 / (ann.scene_state or loc.scene_state)
+            history = stage2 / loc.history if loc.history else None
         missing = [str(p) for p in (bddl, state, history) if p is not None and not p.exists()]
         if missing:
             skip(ann.key, "missing_scene_file", ", ".join(missing))

@@ -27,7 +27,7 @@ from pipeline.config import Stage2Config
 from pipeline.errors import EpisodeError
 from pipeline.evidence import compute_evidence, write_evidence
 from pipeline.records import EpisodeRecord, Localization, QuarantineEntry
-from pipeline.stage2.history import build_history, write_history
+from pipeline.stage2.history import build_history, render_frames, write_history
 from pipeline.stage2.layout import Stage2Paths, load_episode
 from pipeline.stage2.phases import settled_step, split_phases, step_for_time
 from pipeline.stage2.scenes import scene_stem, write_scene
@@ -98,9 +98,9 @@ def process_episode(env, rec: EpisodeRecord, stage1: Path, paths: Stage2Paths, c
         return quarantine(e.reason, e.detail)
     history_rel = None
     if cfg.history_frames > 0:
-        hist, frames = build_history(env, ep.states, ep.steps, onset, cfg.history_frames,
-                                     cfg.history_stride_steps, list(cfg.history_cameras),
-                                     cfg.history_resolution, rec.control_hz)
+        hist = build_history(ep.states, ep.steps, onset, cfg.history_frames, cfg.history_stride_steps,
+                             rec.control_hz)
+        frames = render_frames(env, hist, list(cfg.history_cameras), cfg.history_resolution)
         hist_path = bddl.parent / f"{scene_stem(scene_step)}_history.npz"
         write_history(hist_path, hist)
         write_history(bddl.parent / f"{scene_stem(scene_step)}_history_frames.npz", frames)

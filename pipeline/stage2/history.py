@@ -31,10 +31,9 @@ def history_steps(onset: int, window: int, stride: int) -> list[int]:
     return sorted(s for s in range(onset - stride, onset - stride * window - 1, -stride) if s >= 0)
 
 
-def build_history(env, states: np.ndarray, step_rows: dict[str, np.ndarray], onset: int, window: int,
-                  stride: int, cameras: list[str], size: int,
-                  control_hz: int = 20) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
-    """The reproducible history and its rendered frames (see the module docstring)."""
+def build_history(states: np.ndarray, step_rows: dict[str, np.ndarray], onset: int, window: int,
+                  stride: int, control_hz: int = 20) -> dict[str, np.ndarray]:
+    """The reproducible history before `onset` (see the module docstring); no rendering."""
     steps = history_steps(onset, window, stride)
     out: dict[str, np.ndarray] = {
         "steps": np.asarray(steps, dtype=np.int32),
@@ -45,7 +44,7 @@ def build_history(env, states: np.ndarray, step_rows: dict[str, np.ndarray], ons
         col = step_rows[name]
         key = "actions" if name == "action" else name
         out[key] = np.asarray(col[steps], dtype=np.float32).reshape(len(steps), width)
-    return out, render_frames(env, out, cameras, size)
+    return out
 
 
 def render_frames(env, history: dict[str, np.ndarray], cameras: list[str], size: int) -> dict[str, np.ndarray]:

@@ -8,6 +8,7 @@ stored annotations and compares every file's checksum.
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -107,3 +108,38 @@ def test_compare_names_each_file_that_differs(tmp_path, scene_source):
     # the state file, and the manifest that holds its hash; nothing else
     assert sorted(d[0] for d in diffs) == sorted([rows[0].state_path, "scenarios.parquet"])
     assert all(status.startswith("differs (") for _, status in diffs)
+
+
+def test_a_reviewed_onset_is_released_from_a_new_snapshot_at_the_first_settled_step_after_it(smoke, tmp_path):
+    import shutil
+
+    import numpy as np
+
+    from pipeline.config import Stage2Config
+    from pipeline.release.sources import gather
+
+    run = tmp_path / "run"
+    shutil.copytree(smoke["stored"].parent, run, ignore=shutil.ignore_patterns("release"))
+    ann_file = next((run / "stage3" / "annotations").rglob("episode_*.json"))
+    ann = json.loads(ann_file.read_text())
+    loc = Localization.model_validate_json(
+        (run / "stage2" / "localizations" / ann["suite"] / ann["task"] / f"{ann['episode_id']}.json").read_text())
+    # reviewers put the onset 10 steps (0.5 s) after the model's
+    reviewed = loc.fail_step + 10
+    ann.update(fail_step=reviewed, fail_time_s=reviewed / 20)
+    ann_file.write_text(json.dumps(ann))
+    items, skipped = gather(run, Stage2Config(history_frames=2))
+    item = next(i for i in items if i.annotation.key == ann["key"])
+    assert not [s for s in skipped if s.key == ann["key"]]
+    assert "reviewed_scenes" in item.scene_state.parts and item.step >= reviewed
+    states = np.load(next((run / "stage1" / "episodes").rglob(f"{ann['episode_id']}/states.npy")))
+    np.testing.assert_array_equal(np.load(item.scene_state), states[item.step])
+    assert item.scene_bddl.read_text() == (run / "stage2" / loc.scene_bddl).read_text()
+    history = np.load(item.history)
+    assert history["steps"].tolist() == [reviewed - 2, reviewed - 1]
+    # an annotation that keeps the model's onset keeps stage 2's scene
+    ann.update(fail_step=loc.fail_step, fail_time_s=loc.fail_step / 20)
+    ann_file.write_text(json.dumps(ann))
+    items, _ = gather(run, Stage2Config(history_frames=2))
+    item = next(i for i in items if i.annotation.key == ann["key"])
+    assert item.scene_state == run / "stage2" / loc.scene_state
