@@ -1,0 +1,95 @@
+"""Where to grasp an object: grip-site position and hand yaw.
+
+Input: a `Scene` and an object name. Output: a `Grasp`. The Panda's fingers open to
+about 8 cm and close along R_z(yaw) * world-y when pointing down. Objects whose width
+along some closing direction fits between the fingers are grasped around their middle
+(the narrowest direction, preferring little wrist turn); wider ones (bowls, plates, mugs,
+pans) by their rim wall, at the side where the outer finger lands on free space. Finger
+landing spots are probed with vertical rays through the live scene.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from pipeline.policies.scripted.scene import TABLE_MARGIN, Scene
+
+MAX_SPAN = 0.068  # widest object (along the closing axis) grasped whole
+RIM_INSET = 0.012  # grasp point inside the outer rim edge
+RIM_DEPTH = 0.02  # grip site below the rim top
+FINGER_REACH = 0.047  # open fingertip centre from the grip site
+YAWS = np.linspace(-np.pi / 2, np.pi / 2, 12, endpoint=False)
+
+
+@dataclass(frozen=True)
+class Grasp:
+    pos: np.ndarray
+    yaw: float  # 0: fingers close along world y
+    rim: bool
+
+
+def closing_axis(yaw: float) -> np.ndarray:
+    return np.array([-np.sin(yaw), np.cos(yaw), 0.0])
+
+
+def _blocked(scene: Scene, pos: np.ndarray, yaw: float, top: float) -> float:
+    """How far (m) anything sticks up into the hand's way when the grip site is at `pos`:
+    under both fingertips and under the palm's ends (about 6 cm above the tips)."""
+    ax = closing_axis(yaw)
+    side = np.array([-ax[1], ax[0], 0.0])
+    tip_z = pos[2] - 0.012
+    probes = [(pos + s * ax * FINGER_REACH, tip_z) for s in (-1, 1)]
+    # the hand's collision box reaches ~0.10 m along the closing axis, from ~5 cm above the site
+    probes += [
+        (pos + s * ax * r + t * side * 0.03, pos[2] + 0.05) for s in (-1, 1) for t in (-1, 1) for r in (0.05, 0.1)
+    ]
+    worst = 0.0
+    for point, z in probes:
+        for dx, dy in ((0, 0), (0.008, 0), (-0.008, 0), (0, 0.008), (0, -0.008)):
+            # start well above everything: a ray starting inside a geom would not see it
+            hit = scene.env.ray_down(point[:2] + [dx, dy], max(top, z) + 0.4, z)
+            if hit is not None:
+                worst = max(worst, hit - z)
+    return worst
+
+
+def plan_grasp(scene: Scene, obj: str, dest: np.ndarray | None = None) -> Grasp:
+    """`dest` (x, y, support top) is where the object's body goes next: the hand must fit
+    there too, so rim sides that would put the hand into a wall at the target lose."""
+    box = scene.box(obj)
+    corners = scene.env.object_corners(obj)
+    centre = box.centre
+    h = box.size[2]
+    floor = box.lo[2] + TABLE_MARGIN
+    # whole-object grasp: narrowest closing direction that fits
+    widths = [(float(np.ptp(corners[:, :2] @ closing_axis(y)[:2])), y) for y in YAWS]
+    fitting = [(w + 0.02 * abs(y), y) for w, y in widths if w < MAX_SPAN]
+    if fitting:
+        yaw = min(fitting)[1]
+        mid = corners[:, :2] @ closing_axis(yaw)[:2]
+        z = box.lo[2] + (min(max(0.5 * h, 0.015), h - 0.02) if h > 0.03 else 0.5 * h)
+        pos = np.array([centre[0], centre[1], max(z, floor)])
+        # centre between the extreme faces along the closing axis
+        pos[:2] += closing_axis(yaw)[:2] * ((mid.max() + mid.min()) / 2 - centre[:2] @ closing_axis(yaw)[:2])
+        return Grasp(pos=pos, yaw=float(yaw), rim=False)
+    # rim grasp: radial direction whose outer finger lands clear
+    best = None
+    for theta in np.linspace(-np.pi, np.pi, 16, endpoint=False):
+        u = np.array([np.cos(theta), np.sin(theta), 0.0])
+        reach = float(np.max((corners - centre) @ u))
+        p = centre + u * (reach - RIM_INSET)
+        p[2] = max(box.hi[2] - RIM_DEPTH, floor)
+        yaw = (theta - np.pi / 2 + np.pi / 2) % np.pi - np.pi / 2
+        block = _blocked(scene, p, yaw, box.hi[2])
+        if dest is not None:
+            body = scene.env.object_pose(obj)[0]
+            there = p - body
+            there[:2] += dest[:2]
+            there[2] = p[2] - box.lo[2] + dest[2] + 0.015
+            block += _blocked(scene, there, yaw, there[2])
+        score = block * 10 + 0.01 * abs(yaw)
+        if best is None or score < best[0]:
+            best = (score, Grasp(pos=p, yaw=float(yaw), rim=True))
+    return best[1]

@@ -1,0 +1,80 @@
+"""Goal -> plan: order the goal's conjuncts and run one skill per conjunct.
+
+Input: the BDDL goal (`SimEnv.goal`, lower-case conjunct tuples) and a `Ctx`. Output: a
+generator of primitives for the whole episode. Order: open things first, then knobs,
+then pick-and-place (a container must be open before something goes in), then close.
+A drawer that must receive an object is opened first even when the goal does not say
+so. The plan starts from whatever state it finds (mid-task starts from saved failure
+scenes): satisfied conjuncts are skipped, an object already in hand is placed first,
+and a closed gripper holding nothing useful is opened. After one pass it re-checks the
+goal and retries unsatisfied conjuncts (an object knocked off by a later step) a few
+rounds, then holds still.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+from pipeline.policies.scripted import articulated, knobs
+from pipeline.policies.scripted.primitives import Move
+from pipeline.policies.scripted.skills import Ctx, Plan, free_hand, pick_place
+
+PREDICATES = ("on", "in", "open", "close", "turnon", "turnoff")
+_ORDER = {"open": 0, "turnon": 1, "turnoff": 1, "on": 2, "in": 2, "close": 3}
+ROUNDS = 2
+
+
+def skill_for(conjunct: tuple[str, ...]) -> Callable[[Ctx, tuple[str, ...]], Plan]:
+    kind = conjunct[0]
+    if kind in ("on", "in"):
+        return pick_place
+    if kind == "open":
+        return articulated.open_part
+    if kind == "close":
+        return articulated.close_part
+    if kind in ("turnon", "turnoff"):
+        return knobs.turn_knob
+    raise ValueError(f"goal predicate {kind!r} of {conjunct} is not one of {PREDICATES}")
+
+
+def order_goal(
+    goal: list[tuple[str, ...]], opener: Callable[[str], str | None]
+) -> list[tuple[str, ...]]:
+    """Conjuncts in execution order, with an implied `open` before putting into a drawer.
+
+    `opener(region)` names what must be open before something goes into `region`, or None.
+    """
+    steps = list(goal)
+    for c in goal:
+        thing = opener(c[2]) if c[0] == "in" else None
+        if thing is not None and ("open", thing) not in steps:
+            steps.append(("open", thing))
+    ranked = sorted(enumerate(steps), key=lambda ic: (_ORDER[ic[1][0]], ic[0]))
+    return [c for _, c in ranked]
+
+
+def plan_episode(ctx: Ctx) -> Plan:
+    s = ctx.scene
+    goal = [tuple(c) for c in s.env.goal]
+    for c in goal:
+        skill_for(c)  # fail fast on an unknown predicate
+    steps = order_goal(goal, lambda region: articulated.openable(s.env, region))
+    held = s.holding_any()
+    first = [c for c in steps if c[0] in ("on", "in") and c[1] == held and not s.satisfied(c)]
+    if first:
+        steps = first + [c for c in steps if c not in first]
+    else:
+        yield from free_hand(ctx)
+    for _ in range(ROUNDS):
+        for c in steps:
+            # an implied open (not in the goal) is only needed while the thing is closed
+            if c not in goal and c[0] == "open" and not articulated.is_closed_enough(s.env, c[1]):
+                continue
+            if c in goal and s.satisfied(c):
+                continue
+            yield from skill_for(c)(ctx, c)
+        if s.env.goal_satisfied():
+            break
+    yield from free_hand(ctx)
+    while True:  # done (or given up): hold still with the hand open
+        yield Move(target=s.eef(), gripper=-1.0, tol=-1.0, max_steps=10**9, yaw=ctx.yaw_hold, label="idle")

@@ -1,0 +1,146 @@
+"""Skills: goal conjuncts turned into primitive sequences, reading live state as they go.
+
+Each skill is a generator that yields `Move`/`Grip` primitives. The policy resumes it
+only after the previous primitive finished and only at an action-chunk boundary, so
+every decision (where the object is now, whether it is held, how far a drawer is open)
+uses the live simulator state. A skill returns when its conjunct holds or it gives up.
+
+Inputs: a `Ctx` (scene, noise). Invariants: positions are grip-site targets in world
+coordinates; the hand points down; skills never read the goal flag to act, only to stop
+early or retry (a real expert looks at what it did).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from pipeline.policies.scripted.grasps import plan_grasp
+from pipeline.policies.scripted.noise import Noise
+from pipeline.policies.scripted.primitives import Grip, Move, Primitive
+from pipeline.policies.scripted.scene import Scene
+
+Plan = Iterator[Primitive]
+HAND_CLEARANCE = 0.07  # grip site above obstacles when the hand moves empty
+CARRY_CLEARANCE = 0.04  # held object's bottom above obstacles in transit
+MAX_Z = 1.35  # keep targets inside the arm's comfortable workspace
+
+
+@dataclass
+class Ctx:
+    scene: Scene
+    noise: Noise
+    max_attempts: int = 3
+    close_steps: int = 14
+    open_steps: int = 8
+    yaw_hold: float = 0.0  # hand yaw while carrying (the yaw it grasped with)
+    approach_hold: np.ndarray | None = None  # set while the hand is tilted (drawer handles)
+    events: list[str] = field(default_factory=list)  # what went wrong, in order (for reports)
+
+    def move(self, target, speed: float = 1.0, **kw) -> Move:
+        t = np.asarray(target, dtype=float).copy()
+        t[2] = min(t[2], MAX_Z)
+        return Move(target=t, speed=min(1.0, speed * self.noise.speed), **kw)
+
+
+def travel(ctx: Ctx, dest: np.ndarray, yaw: float, gripper: float, lift_z: float) -> Plan:
+    """Rise to `lift_z` (if lower), cross over to above `dest` at that height."""
+    eef = ctx.scene.eef()
+    z = max(lift_z, dest[2])
+    if eef[2] < z - 0.015:
+        yield ctx.move([eef[0], eef[1], z], gripper=gripper, yaw=yaw, tol=0.02, label="lift")
+    yield ctx.move([dest[0], dest[1], z], gripper=gripper, yaw=yaw, tol=0.015, label="transport")
+
+
+def free_hand(ctx: Ctx) -> Plan:
+    """Open the gripper if it is not open (it holds nothing useful), and back off upwards."""
+    s = ctx.scene
+    if not s.gripper_open():
+        yield Grip(-1.0, ctx.open_steps + 4, label="release")
+        eef = s.eef()
+        yield ctx.move(eef + [0, 0, 0.06], tol=0.02, label="back_off")
+
+
+def grasp(ctx: Ctx, obj: str, dest: np.ndarray | None = None) -> Plan:
+    s = ctx.scene
+    g = plan_grasp(s, obj, dest)
+    pos = g.pos + ctx.noise.grasp_offset()
+    lift_z = s.path_clearance(s.eef(), pos, 0.06, {obj}) + HAND_CLEARANCE
+    hover = pos + [0, 0, 0.08]
+    yield from travel(ctx, hover, g.yaw, -1.0, lift_z)
+    yield ctx.move(hover, yaw=g.yaw, tol=0.012, label="hover")
+    t = ctx.noise.timing()
+    early = {"switch_gripper": 1.0, "switch_dist": 0.005 * -t} if t < 0 else {}
+    yield ctx.move(pos, speed=0.5, yaw=g.yaw, tol=0.007, max_steps=50, label="descend", **early)
+    ctx.yaw_hold = g.yaw
+    yield Grip(1.0, ctx.close_steps + max(t, 0), label="close")
+    yield ctx.move(s.eef() + [0, 0, 0.1], gripper=1.0, speed=0.6, yaw=g.yaw, tol=0.02, label="pick_lift")
+
+
+def place_xy(ctx: Ctx, obj: str, target: str) -> np.ndarray:
+    """Where the object's body should end up (xy): on an object's body or a region's centre."""
+    return ctx.scene.pos(target)[:2].copy()
+
+
+def destination(ctx: Ctx, obj: str, target: str) -> np.ndarray:
+    """(x, y, support top) where the object's body should come to rest (no noise)."""
+    s = ctx.scene
+    box = s.box(obj)
+    dest = place_xy(ctx, obj, target)
+    foot = dest + (box.centre[:2] - s.env.object_pose(obj)[0][:2])
+    below = np.inf
+    if s.env.is_region(target):
+        r = s.env.region(target)
+        below = r["pos"][2] + float(np.abs(r["mat"] @ r["size"])[2]) + 0.03
+    radius = 0.6 * float(min(box.size[0], box.size[1])) / 2
+    return np.array([dest[0], dest[1], s.support_top(foot, radius, {obj}, below=below)])
+
+
+def place(ctx: Ctx, obj: str, target: str) -> Plan:
+    s = ctx.scene
+    env = s.env
+    eef = s.eef()
+    body = env.object_pose(obj)[0]
+    box = s.box(obj)
+    hold = eef - body  # grip site relative to the object body, kept while carrying
+    bottom = eef[2] - box.lo[2]  # grip site above the object's bottom
+    radius = 0.6 * float(min(box.size[0], box.size[1])) / 2
+    dest = place_xy(ctx, obj, target) + ctx.noise.place_offset()[:2]
+    foot = dest + (box.centre[:2] - body[:2])
+    below = np.inf
+    if env.is_region(target):
+        r = env.region(target)
+        below = r["pos"][2] + float(np.abs(r["mat"] @ r["size"])[2]) + 0.03
+    support = s.support_top(foot, radius, {obj}, below=below)
+    release_z = support + 0.015 + bottom + abs(ctx.noise.place_offset()[2])
+    lift_z = s.path_clearance(box.centre, foot, radius, {obj}) + CARRY_CLEARANCE + bottom
+    goal = np.array([dest[0] + hold[0], dest[1] + hold[1], release_z])
+    yaw = ctx.yaw_hold
+    yield from travel(ctx, goal, yaw, 1.0, max(lift_z, release_z + 0.05))
+    if s.holding_any() != obj:
+        ctx.events.append(f"dropped:{obj}")
+        return
+    t = ctx.noise.timing()
+    early = {"switch_gripper": -1.0, "switch_dist": 0.006 * -t} if t < 0 else {}
+    yield ctx.move(goal, gripper=1.0, speed=0.5, yaw=yaw, tol=0.01, max_steps=60, label="lower", **early)
+    yield Grip(-1.0, ctx.open_steps + max(t, 0), label="open")
+    yield ctx.move(s.eef() + [0, 0, 0.08], yaw=yaw, tol=0.02, label="retreat")
+
+
+def pick_place(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:
+    _, obj, target = conjunct
+    s = ctx.scene
+    for _ in range(ctx.max_attempts):
+        if s.satisfied(conjunct):
+            return
+        if s.holding_any() != obj:
+            yield from free_hand(ctx)
+            yield from grasp(ctx, obj, destination(ctx, obj, target))
+            if s.holding_any() != obj:
+                ctx.events.append(f"missed_grasp:{obj}")
+                continue
+        yield from place(ctx, obj, target)
+        if not s.satisfied(conjunct) and s.holding_any() != obj:
+            ctx.events.append(f"misplaced:{obj}")
