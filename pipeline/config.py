@@ -107,6 +107,9 @@ class VideoConfig(_Strict):
     resolution: int = Field(default=256, ge=32, le=1024)
     # render which episodes: failures only (all later stages need) or all of them
     render: Literal["failures", "all", "none"] = "failures"
+    # fast: no multisampling, no reflections; 2.3x cheaper per software-rendered frame for a
+    # mean pixel difference of 1.4/255 (videos are watched, not fed to policies)
+    quality: Literal["fast", "standard"] = "fast"
 
     @field_validator("fps")
     @classmethod

@@ -62,7 +62,7 @@ class SimEnv:
             self._wrapper.reset()
         self.task = task
         self.env = self._wrapper.env  # the robosuite/LIBERO domain object
-        self._renderers: dict[int, FrameRenderer] = {}
+        self._renderers: dict[tuple[int, str], FrameRenderer] = {}
         self._owner = self._body_owners()
 
     # ---- episode lifecycle -------------------------------------------------------------
@@ -390,13 +390,14 @@ class SimEnv:
         return pairs
 
     # ---- rendering ----------------------------------------------------------------------
-    def render(self, camera: str = "agentview", size: int = 256) -> np.ndarray:
-        """HxWx3 uint8 frame of `camera`, right side up, for the current state."""
+    def render(self, camera: str = "agentview", size: int = 256, quality: str = "standard") -> np.ndarray:
+        """HxWx3 uint8 frame of `camera`, right side up, for the current state. `quality`
+        "fast" is for videos people and VLMs watch, never for policy inputs (see render.py)."""
         if camera not in CAMERAS:
             raise ValueError(f"unknown camera {camera!r}; choose from {CAMERAS}")
-        r = self._renderers.get(size)
+        r = self._renderers.get((size, quality))
         if r is None:
-            r = self._renderers[size] = FrameRenderer(self.env.sim.model._model, size)
+            r = self._renderers[(size, quality)] = FrameRenderer(self.env.sim.model._model, size, quality)
         return r.render(self.env.sim.data._data, camera)
 
     def project(self, camera: str, size: int, points: np.ndarray) -> np.ndarray:

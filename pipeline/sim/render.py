@@ -4,6 +4,11 @@ robosuite's `sim.render` returns images upside down (OpenGL's origin); `mujoco.R
 returns them the right way, costs the same (about 120 ms per 256x256 frame on this CPU),
 and works on an environment built without robosuite's offscreen renderer, so physics-only
 rollouts stay cheap and frames can be rendered later from logged states.
+
+Quality: "standard" is LIBERO's own look (4x multisampling, reflective table), which
+policies are trained on. "fast" turns both off: 2.3x cheaper per frame in software
+rendering (108 -> 46 ms at 256x256 here) for a mean pixel difference of 1.4/255, meant for
+videos people and VLMs watch, never for policy inputs.
 """
 
 from __future__ import annotations
@@ -11,21 +16,33 @@ from __future__ import annotations
 import numpy as np
 
 CAMERAS = ("agentview", "robot0_eye_in_hand")
+QUALITIES = ("standard", "fast")
 
 
 class FrameRenderer:
     """Renders named cameras of one MuJoCo model at one resolution; reuse it across frames."""
 
-    def __init__(self, model, size: int):
+    def __init__(self, model, size: int, quality: str = "standard"):
         import mujoco
 
+        if quality not in QUALITIES:
+            raise ValueError(f"unknown render quality {quality!r}; choose from {QUALITIES}")
         self._mujoco = mujoco
         self.size = size
-        self._renderer = mujoco.Renderer(model, height=size, width=size)
+        self.fast = quality == "fast"
+        samples = model.vis.quality.offsamples
+        if self.fast:  # multisampling is fixed when the GL context is made
+            model.vis.quality.offsamples = 0
+        try:
+            self._renderer = mujoco.Renderer(model, height=size, width=size)
+        finally:
+            model.vis.quality.offsamples = samples
 
     def render(self, data, camera: str) -> np.ndarray:
         """HxWx3 uint8 image of `camera` for the current `data` (call mj_forward first)."""
         self._renderer.update_scene(data, camera=camera)
+        if self.fast:
+            self._renderer.scene.flags[self._mujoco.mjtRndFlag.mjRND_REFLECTION] = 0
         return self._renderer.render().copy()
 
     def close(self) -> None:

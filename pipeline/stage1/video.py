@@ -89,7 +89,8 @@ def write_videos(
 
 
 def render_videos(
-    env: SimEnv, states: np.ndarray, folder: str | Path, cameras: list[str], fps: int, size: int
+    env: SimEnv, states: np.ndarray, folder: str | Path, cameras: list[str], fps: int, size: int,
+    quality: str = "standard",
 ) -> dict[str, str]:
     """Render `cameras` from logged states at `fps`; return camera -> file name."""
     steps = frame_steps(len(states) - 1, fps)
@@ -97,7 +98,7 @@ def render_videos(
     for s in steps:
         env.set_state(states[s])
         for c in cameras:
-            frames[c].append(env.render(c, size))
+            frames[c].append(env.render(c, size, quality))
     return write_videos(frames, steps, Path(folder), fps)
 
 

@@ -82,7 +82,7 @@ def run_one(env: SimEnv, policy: Policy, unit: EpisodeUnit, cfg: Config, stage1_
     rec.write(folder)
     videos: dict[str, str] = {}
     if should_render(v.render, result.success):
-        videos = render_videos(env, rec.states_array(), folder, list(v.cameras), v.fps, v.resolution)
+        videos = render_videos(env, rec.states_array(), folder, list(v.cameras), v.fps, v.resolution, v.quality)
     return EpisodeRecord(
         suite=unit.suite,
         task=unit.task,

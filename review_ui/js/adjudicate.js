@@ -1,11 +1,10 @@
 // The adjudication page: per field, the model's and every reviewer's value side by side;
 // only the disputed fields are decided here, with a required rationale.
 import { api, ApiError, newKey } from "./api.js";
-import { CATEGORY_KEYS, h } from "./dom.js";
+import { h } from "./dom.js";
 import { FieldControls, FIELD_LABELS, FIELDS, showValue } from "./fields.js";
-import { episodeHeader, mediaKeys, playerAndTracks, versionLine } from "./item_common.js";
+import { episodeHeader, itemKeys, playerAndTracks, versionLine } from "./item_common.js";
 
-const CATEGORY_BY_KEY = Object.fromEntries(Object.entries(CATEGORY_KEYS).map(([c, k]) => [k.toLowerCase(), c]));
 const REVIEWER_COLORS = ["#7c3aed", "#0891b2", "#db2777", "#65a30d"];
 
 export async function adjudicatePage(root, id, app) {
@@ -109,12 +108,8 @@ export async function adjudicatePage(root, id, app) {
   return {
     destroy: () => media.destroy(),
     onKey(e) {
+      if (itemKeys(e, media, controls, p)) return true;
       const k = e.key.toLowerCase();
-      if (mediaKeys(e, media.player)) return true;
-      if (k === "m" && p.fail_time_s != null) { media.player.seekSim(p.fail_time_s); return true; }
-      if (k === "t") { controls.setTimeAtPlayhead(); return true; }
-      if (["1", "2", "3", "4"].includes(k)) { controls.set("recovery_level", `L${k}`); return true; }
-      if (CATEGORY_BY_KEY[k]) { controls.set("failure_category", CATEGORY_BY_KEY[k]); return true; }
       if (k === "s") { submit(); return true; }
       return false;
     },

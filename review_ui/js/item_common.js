@@ -1,7 +1,7 @@
 // Pieces both item pages share: the episode header, video + evidence on one playhead,
-// the video keys.
+// the keys for video and field values.
 import { api } from "./api.js";
-import { h } from "./dom.js";
+import { CATEGORY_KEYS, h } from "./dom.js";
 import { Player } from "./player.js";
 import { Tracks } from "./tracks.js";
 
@@ -56,4 +56,18 @@ export function mediaKeys(e, player) {
     case "End": player.seekFrame(player.nFrames - 1); return true;
     default: return false;
   }
+}
+
+const CATEGORY_BY_KEY = Object.fromEntries(Object.entries(CATEGORY_KEYS).map(([c, k]) => [k.toLowerCase(), c]));
+
+// the keys shared by the review and adjudication pages: video, model time, field values;
+// returns true when the key was handled
+export function itemKeys(e, media, controls, proposal) {
+  if (mediaKeys(e, media.player)) return true;
+  const k = e.key.toLowerCase();
+  if (k === "m" && proposal.fail_time_s != null) { media.player.seekSim(proposal.fail_time_s); return true; }
+  if (k === "t") { controls.setTimeAtPlayhead(); return true; }
+  if (["1", "2", "3", "4"].includes(k)) { controls.set("recovery_level", `L${k}`); return true; }
+  if (CATEGORY_BY_KEY[k]) { controls.set("failure_category", CATEGORY_BY_KEY[k]); return true; }
+  return false;
 }

@@ -2,11 +2,10 @@
 // A reviewer sees the model's proposal (as a suggestion, with model and prompt version) and
 // never another reviewer's decision (the API does not send them).
 import { api, ApiError, newKey } from "./api.js";
-import { CATEGORY_KEYS, fmtTime, h } from "./dom.js";
+import { fmtTime, h } from "./dom.js";
 import { FieldControls, FIELDS, showValue } from "./fields.js";
-import { episodeHeader, mediaKeys, playerAndTracks, versionLine } from "./item_common.js";
+import { episodeHeader, itemKeys, playerAndTracks, versionLine } from "./item_common.js";
 
-const CATEGORY_BY_KEY = Object.fromEntries(Object.entries(CATEGORY_KEYS).map(([c, k]) => [k.toLowerCase(), c]));
 
 export async function reviewPage(root, id, app) {
   const item = await api(`/api/items/${id}`);
@@ -126,12 +125,8 @@ export async function reviewPage(root, id, app) {
   return {
     destroy: () => media.destroy(),
     onKey(e) {
+      if (itemKeys(e, media, controls, p)) return true;
       const k = e.key.toLowerCase();
-      if (mediaKeys(e, media.player)) return true;
-      if (k === "m" && p.fail_time_s != null) { media.player.seekSim(p.fail_time_s); return true; }
-      if (k === "t") { controls.setTimeAtPlayhead(); return true; }
-      if (["1", "2", "3", "4"].includes(k)) { controls.set("recovery_level", `L${k}`); return true; }
-      if (CATEGORY_BY_KEY[k]) { controls.set("failure_category", CATEGORY_BY_KEY[k]); return true; }
       if (k === "a") { submit("accept"); return true; }
       if (k === "s") { submit("revise"); return true; }
       if (k === "f") { openFlag(); return true; }

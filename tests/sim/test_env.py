@@ -126,3 +126,15 @@ def test_env_cache_builds_once_per_task_and_evicts_least_recent():
         e2 = cache.get(b)
         assert e2 is not e1 and cache.builds == 2
         assert cache.get(a) is not e1 and cache.builds == 3
+
+
+@pytest.mark.sim
+def test_fast_quality_frames_differ_only_slightly_from_standard(env):
+    env.reset_to_init(0)
+    standard = env.render("agentview", 128).astype(int)
+    fast = env.render("agentview", 128, quality="fast").astype(int)
+    diff = np.abs(standard - fast)
+    assert diff.max() > 0, "fast quality changed nothing: multisampling/reflections still on"
+    assert diff.mean() < 4, f"fast quality looks different: mean pixel difference {diff.mean():.2f}"
+    with pytest.raises(ValueError, match="quality"):
+        env.render("agentview", 128, quality="ultra")

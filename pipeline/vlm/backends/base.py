@@ -103,3 +103,20 @@ class VLMBackend(Protocol):
         ...
 
     def close(self) -> None: ...
+
+
+class BackendBase:
+    """The one-request conveniences of `VLMBackend`, written once on top of `run`."""
+
+    def run(self, requests: list[VLMRequest], progress=None) -> list[VLMResult]:  # pragma: no cover
+        raise NotImplementedError
+
+    def localize(self, video: str | Path, instruction: str, frames_table: pa.Table | None = None) -> VLMResult:
+        return self.run([VLMRequest(task="localize", video=Path(video), instruction=instruction,
+                                    frames_table=frames_table)])[0]
+
+    def characterize(
+        self, video: str | Path, instruction: str, fail_time_s: float, frames_table: pa.Table | None = None
+    ) -> VLMResult:
+        return self.run([VLMRequest(task="characterize", video=Path(video), instruction=instruction,
+                                    fail_time_s=fail_time_s, frames_table=frames_table)])[0]

@@ -29,7 +29,7 @@ import httpx
 
 from pipeline.config import OpenAIBackendConfig, SamplingConfig
 from pipeline.errors import EpisodeError, FatalError, RetryableError
-from pipeline.vlm.backends.base import VLMRequest, VLMResult
+from pipeline.vlm.backends.base import BackendBase, VLMRequest, VLMResult
 from pipeline.vlm.prompts import Prompt, prompt_text
 from pipeline.vlm.video_input import SampledVideo, jpeg_frames_data_url, mp4_data_url, sample_video
 
@@ -38,7 +38,7 @@ FATAL_STATUS = {401, 403, 404}
 RATE_TOLERANCE = 0.01
 
 
-class OpenAIBackend:
+class OpenAIBackend(BackendBase):
     name = "openai"
 
     def __init__(self, cfg: OpenAIBackendConfig, sampling: SamplingConfig, prompts: dict[str, Prompt]):
@@ -189,24 +189,6 @@ class OpenAIBackend:
     # ---- the VLMBackend protocol ----------------------------------------------------------
     def run(self, requests: list[VLMRequest], progress: Callable[[VLMResult], None] | None = None) -> list[VLMResult]:
         return asyncio.run(self.arun(requests, progress))
-
-    def localize(self, video: str | Path, instruction: str, frames_table=None) -> VLMResult:
-        return self.run(
-            [VLMRequest(task="localize", video=Path(video), instruction=instruction, frames_table=frames_table)]
-        )[0]
-
-    def characterize(self, video: str | Path, instruction: str, fail_time_s: float, frames_table=None) -> VLMResult:
-        return self.run(
-            [
-                VLMRequest(
-                    task="characterize",
-                    video=Path(video),
-                    instruction=instruction,
-                    fail_time_s=fail_time_s,
-                    frames_table=frames_table,
-                )
-            ]
-        )[0]
 
     def close(self) -> None:
         pass

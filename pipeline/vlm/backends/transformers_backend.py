@@ -26,7 +26,7 @@ from pathlib import Path
 
 from pipeline.config import SamplingConfig, TransformersBackendConfig
 from pipeline.errors import ConfigError, EpisodeError
-from pipeline.vlm.backends.base import VLMRequest, VLMResult
+from pipeline.vlm.backends.base import BackendBase, VLMRequest, VLMResult
 from pipeline.vlm.prompts import Prompt, prompt_text
 from pipeline.vlm.video_input import sample_video
 
@@ -34,7 +34,7 @@ THINK_END = "</think>"
 _TIME_MARK = re.compile(r"<\d+(?:\.\d+)? seconds>")
 
 
-class TransformersBackend:
+class TransformersBackend(BackendBase):
     name = "transformers"
 
     def __init__(
@@ -147,22 +147,6 @@ class TransformersBackend:
             if progress:
                 progress(results[-1])
         return results
-
-    def localize(self, video: str | Path, instruction: str, frames_table=None) -> VLMResult:
-        return self._one(
-            VLMRequest(task="localize", video=Path(video), instruction=instruction, frames_table=frames_table)
-        )
-
-    def characterize(self, video: str | Path, instruction: str, fail_time_s: float, frames_table=None) -> VLMResult:
-        return self._one(
-            VLMRequest(
-                task="characterize",
-                video=Path(video),
-                instruction=instruction,
-                fail_time_s=fail_time_s,
-                frames_table=frames_table,
-            )
-        )
 
     def close(self) -> None:
         self.model = None
