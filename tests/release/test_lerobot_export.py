@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import base64
 import json
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -19,6 +21,9 @@ from tests.release.factories import make_run, npy_bytes, release_config
 pytestmark = pytest.mark.sim
 
 SIZE = 64
+REPO = Path(__file__).resolve().parents[2]
+# LeRobot's own reader lives in its own environment (it needs numpy 2; ours pins numpy < 2)
+READER_PYTHON = Path(os.environ.get("LEROBOT_READER_PYTHON", REPO / ".venv-lerobot/bin/python"))
 
 
 @pytest.fixture(scope="module")
@@ -94,3 +99,41 @@ def test_lerobot_doctor_reads_the_export_without_failures(exported):
         assert "FAIL" not in severity.values(), severity
         messages = [m["message"] for c in report["checks"] for m in c["messages"]]
         assert not any("stats.json not found" in m for m in messages)
+
+
+def test_lerobots_own_dataset_class_opens_the_export(exported, tmp_path):
+    out, src = exported
+    if not READER_PYTHON.is_file():
+        pytest.fail(f"LeRobot reader environment missing ({READER_PYTHON}); build it with `make setup-test` "
+                    "(or `bash scripts/setup_lerobot_reader.sh`)")
+    root = out / "rollouts"
+    env = {**os.environ, "HF_HUB_OFFLINE": "1", "HF_HOME": str(tmp_path / "hf")}
+    # frame 30 = episode 1, frame 6: checks LeRobot's episode -> video offsets, not just the first frame
+    res = subprocess.run([str(READER_PYTHON), str(Path(__file__).with_name("lerobot_reader.py")), str(root),
+                          str(tmp_path / "work"), "0", "30"], capture_output=True, text=True, env=env, timeout=600)
+    assert res.returncode == 0, res.stderr[-4000:]
+    got = json.loads(res.stdout)
+    assert (got["converted_version"], got["len"], got["num_frames"], got["num_episodes"], got["fps"]) == (
+        "v3.0", 48, 48, 2, 20)
+    assert got["episode_lengths"] == [24, 24] and got["tasks"] == [src.task.instruction]
+    assert got["features"]["observation.state"] == {"dtype": "float32", "shape": [8]}
+    assert got["features"]["action"] == {"dtype": "float32", "shape": [7]}
+    cams = ["observation.images.image", "observation.images.wrist_image"]
+    assert sorted(got["video_keys"]) == cams
+    table = pq.read_table(root / "data/chunk-000/episode_000001.parquet")
+    first, mid = got["frames"]
+    assert (mid["index"], mid["episode_index"], mid["frame_index"]) == (30, 1, 6)
+    assert mid["timestamp"] == pytest.approx(6 / 20) and mid["task"] == src.task.instruction
+    assert np.allclose(mid["state"], table.column("observation.state")[6].as_py(), atol=1e-6)
+    assert np.allclose(mid["action"], table.column("action")[6].as_py(), atol=1e-6)
+    for key in cams:
+        for frame in (first, mid):
+            img = frame[key]
+            assert img["shape"] == [3, SIZE, SIZE] and img["dtype"] == "torch.float32"
+            assert img["std"] > 0.02 and img["max"] - img["min"] > 0.2, (key, img)  # a real picture, not blank
+        # LeRobot's decoded frame is the MP4's frame 6 of episode 1 (our own decode of the same file)
+        with av.open(str(root / f"videos/chunk-000/{key}/episode_000001.mp4")) as c:
+            ours = [f.to_ndarray(format="rgb24") for f in c.decode(c.streams.video[0])]
+        theirs = np.frombuffer(base64.b64decode(mid[key]["rgb24"]), np.uint8).reshape(SIZE, SIZE, 3)
+        diff = [np.abs(theirs.astype(int) - f.astype(int)).mean() for f in ours]
+        assert diff[6] < 0.5 and int(np.argmin(diff)) == 6, (key, diff)

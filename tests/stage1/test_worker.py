@@ -69,7 +69,7 @@ def test_logged_states_replay_bit_identically_from_the_logged_actions(env, tmp_p
         video = read_video(folder / rec.videos[cam])
         assert len(video) == 5
         env.set_state(states[8])
-        expected = env.render(cam, 64).astype(float)
+        expected = env.render(cam, 64, cfg.stage1.video.quality).astype(float)
         assert np.abs(video[2].astype(float) - expected).mean() < 8  # lossy, but the same picture
 
 
