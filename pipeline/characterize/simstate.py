@@ -129,7 +129,7 @@ def _action(level: Level, category: Category, ev: Evidence, obstacle: str | None
     known = ev.objects + ev.fixtures
     place = _place_phrase(ev.goal, known)
     if not ev.targets:  # fixture goals: open / close / turn on / turn off
-        text = f"Retry: {place}"
+        text = f"{place[0].upper()}{place[1:]} again"  # an imperative, e.g. "Open the wooden cabinet again"
     else:
         target = " and the ".join(readable(t, known) for t in ev.targets)
         if level is Level.L4 and obstacle:
