@@ -12,6 +12,12 @@ Quirks kept here and nowhere else:
 - the Panda gripper ramps its command (`current_action`) across steps: it is not part of
   the MuJoCo state, so a restored closed gripper needs some close commands to stay closed.
 - robosuite's own horizon/done handling is disabled (`ignore_done`); runners own horizons.
+- LIBERO re-samples fixture poses (cabinets, stoves, racks; about +-1 cm) at every reset
+  from the global `np.random`, and fixture poses are NOT part of the flattened state. So
+  every reset here seeds that sampler with `FIXTURE_SEED` (and restores the caller's global
+  RNG state afterwards): fixtures sit at one pose per task in every episode, every process
+  and every restored scene. Plain LIBERO gets the same layout with `np.random.seed(0)`
+  right before `env.reset()`.
 """
 
 from __future__ import annotations
@@ -28,6 +34,7 @@ from pipeline.sim.render import CAMERAS, FrameRenderer
 
 ACTION_DIM = 7  # delta position (3), delta axis-angle (3), gripper (-1 open, +1 close)
 CONTROL_HZ = 20
+FIXTURE_SEED = 0  # seeds LIBERO's fixture placement at every reset (see the module docstring)
 
 
 @dataclass(frozen=True)
@@ -59,7 +66,7 @@ class SimEnv:
                 ignore_done=True,
                 hard_reset=False,  # soft resets keep the compiled model: cheap episode starts
             )
-            self._wrapper.reset()
+            self._seeded_reset()
         self.task = task
         self.env = self._wrapper.env  # the robosuite/LIBERO domain object
         self._renderers: dict[tuple[int, str], FrameRenderer] = {}
@@ -79,7 +86,7 @@ class SimEnv:
                 f"state has shape {state.shape}, but task {self.task.task_id} needs ({self.state_dim},)"
             )
         with _quiet():
-            self._wrapper.reset()
+            self._seeded_reset()
         robot = self.env.robots[0]
         robot.gripper.current_action = np.zeros(robot.gripper.dof)
 
@@ -87,6 +94,19 @@ class SimEnv:
         data.qacc_warmstart[:] = 0
         self._wrapper.set_init_state(state)
         self.reanchor_controller()
+
+    def _seeded_reset(self) -> None:
+        """LIBERO's reset with its fixture placement drawn from a fixed seed."""
+        saved = np.random.get_state()
+        np.random.seed(FIXTURE_SEED)
+        try:
+            self._wrapper.reset()
+        finally:
+            np.random.set_state(saved)
+
+    def fixture_poses(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+        """World pose of every fixture: not in the flattened state, fixed by the seeded reset."""
+        return {n: self.object_pose(n) for n in self.fixture_names}
 
     def reset_to_init(self, index: int) -> None:
         self.reset_to(self.task.init_states()[index])
@@ -377,8 +397,10 @@ class SimEnv:
                 out[name] = float(np.linalg.norm(d.qvel[a : a + 3]))
         return out
 
-    def contacts(self) -> set[tuple[str, str]]:
-        """Unordered pairs of named things in contact now (robot, objects, fixtures)."""
+    def contacts(self) -> list[tuple[str, str]]:
+        """Pairs of named things in contact now (robot, objects, fixtures, table), each pair
+        sorted and the list sorted: a set of strings iterates in a per-process hash order,
+        which made policies that scan contacts differ between runs of the same seed."""
         m, d = self.env.sim.model, self.env.sim.data
         pairs = set()
         for i in range(d.ncon):
@@ -387,7 +409,7 @@ class SimEnv:
             b = self._owner[m.geom_bodyid[c.geom2]]
             if a and b and a != b:
                 pairs.add(tuple(sorted((a, b))))
-        return pairs
+        return sorted(pairs)
 
     # ---- rendering ----------------------------------------------------------------------
     def render(self, camera: str = "agentview", size: int = 256, quality: str = "standard") -> np.ndarray:

@@ -40,6 +40,7 @@ def test_an_episode_in_a_reused_environment_is_bit_identical_to_a_fresh_one(env)
         return e.get_state()
 
     first = play(env)
+    fixtures = env.fixture_poses()
     # dirty the environment (gripper ramp, warm start) with another episode
     env.reset_to_init(2)
     for a in _random_actions(30, seed=4):
@@ -47,8 +48,14 @@ def test_an_episode_in_a_reused_environment_is_bit_identical_to_a_fresh_one(env)
     again = play(env)
     with SimEnv(env.task) as fresh:
         from_fresh = play(fresh)
+        fresh_fixtures = fresh.fixture_poses()
     np.testing.assert_array_equal(first, again)
     np.testing.assert_array_equal(first, from_fresh)
+    # fixture poses are not in the flattened state: the seeded reset must pin them
+    assert fixtures and fixtures.keys() == fresh_fixtures.keys()
+    for name, (pos, quat) in fixtures.items():
+        np.testing.assert_array_equal(pos, fresh_fixtures[name][0])
+        np.testing.assert_array_equal(quat, fresh_fixtures[name][1])
 
 
 @pytest.mark.sim
@@ -138,3 +145,33 @@ def test_fast_quality_frames_differ_only_slightly_from_standard(env):
     assert diff.mean() < 4, f"fast quality looks different: mean pixel difference {diff.mean():.2f}"
     with pytest.raises(ValueError, match="quality"):
         env.render("agentview", 128, quality="ultra")
+
+
+_FIXTURES_SCRIPT = """
+import json, numpy as np
+from pipeline.sim import SimEnv, tasks
+with SimEnv(tasks(["libero_goal"])[0]) as env:
+    np.random.seed(12345)  # the caller's global RNG must not decide the layout ...
+    env.reset_to_init(2)
+    after = np.random.random()  # ... nor be disturbed by it
+    print(json.dumps({"poses": {n: p.tolist() for n, (p, _) in env.fixture_poses().items()}, "after": after}))
+"""
+
+
+@pytest.mark.sim
+def test_fixture_layout_is_the_same_in_every_process_and_leaves_the_global_rng_alone():
+    """LIBERO re-samples fixture poses from np.random at every reset; they are not in the state."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    runs = []
+    for hash_seed in ("1", "2"):
+        env = dict(os.environ, PYTHONHASHSEED=hash_seed, MUJOCO_GL="egl")
+        out = subprocess.run([sys.executable, "-c", _FIXTURES_SCRIPT], capture_output=True, text=True, env=env,
+                             timeout=300, check=True)
+        runs.append(json.loads(out.stdout.strip().splitlines()[-1]))
+    assert runs[0]["poses"] == runs[1]["poses"] and len(runs[0]["poses"]) == 3
+    np.random.seed(12345)
+    assert runs[0]["after"] == np.random.random()
