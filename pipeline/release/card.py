@@ -95,6 +95,22 @@ state (`step_<NNNN>_sim_state.npy`: time, qpos, qvel) at the failure, with the e
 pre-failure history beside it. `scenarios.parquet` lists every scene with its labels and
 the SHA-256 of each file; `recover verify <this folder>` checks a copy.
 
+## Restoring a scene
+
+LIBERO places fixtures (cabinets, stoves, racks) by sampling from the global `np.random`
+at every reset, and fixture poses are not in the flattened state. These scenes were
+recorded with that sampler seeded with 0, so restore them the same way:
+
+```python
+env = OffScreenRenderEnv(bddl_file_name="step_NNNN.bddl")  # LIBERO's own wrapper
+np.random.seed(0)
+env.reset()
+env.set_init_state(np.load("step_NNNN_sim_state.npy"))
+```
+
+The Panda gripper's command ramp is not in the state either: to keep a restored grasp,
+send a few close commands (or open ones) before the policy acts, as `recover eval` does.
+
 ## Scenes per suite and recovery level ({len(rows)} scenes)
 
 {_table(["suite", *LEVELS, "total"], level_rows)}

@@ -175,3 +175,24 @@ def test_fixture_layout_is_the_same_in_every_process_and_leaves_the_global_rng_a
     assert runs[0]["poses"] == runs[1]["poses"] and len(runs[0]["poses"]) == 3
     np.random.seed(12345)
     assert runs[0]["after"] == np.random.random()
+
+
+@pytest.mark.sim
+def test_plain_libero_seeded_with_zero_before_reset_gets_our_fixture_layout():
+    """The restore recipe the README and the dataset card give to users of plain LIBERO."""
+    from libero.libero.envs import OffScreenRenderEnv
+
+    task = tasks(["libero_goal"])[0]
+    with SimEnv(task) as ours:
+        ours.reset_to_init(2)
+        mine = {n: p for n, (p, _) in ours.fixture_poses().items()}
+    plain = OffScreenRenderEnv(bddl_file_name=str(task.bddl_path), camera_heights=32, camera_widths=32)
+    try:
+        np.random.seed(0)
+        plain.reset()
+        plain.set_init_state(task.init_states()[2])
+        inner = plain.env
+        for name, pos in mine.items():
+            np.testing.assert_array_equal(inner.sim.data.body_xpos[inner.obj_body_id[name]], pos)
+    finally:
+        plain.close()
