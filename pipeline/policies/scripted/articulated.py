@@ -66,34 +66,27 @@ def _handle(env: SimEnv, joint: str, pull: np.ndarray) -> tuple[np.ndarray, int,
     return boxes[int(np.argmax(front))], k, s
 
 
-def open_part(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:
+def _operate_part(ctx: Ctx, conjunct: tuple[str, ...], opening: bool) -> Plan:
     env = ctx.scene.env
     joint = part_joint(env, conjunct[1])
     if joint is None:
-        raise ValueError(f"{conjunct}: no joint to open in task {env.task.task_id}")
+        raise ValueError(f"{conjunct}: no joint to {'open' if opening else 'close'} in task {env.task.task_id}")
     for _ in range(ctx.max_attempts):
-        if env.object_state(conjunct[1]).is_open():
+        state = env.object_state(conjunct[1])
+        if state.is_open() if opening else state.is_close():
             return
-        fr = env.joint_frame(joint)
-        if fr["kind"] == "slide":
-            yield from _pull_drawer(ctx, joint)
+        if env.joint_frame(joint)["kind"] == "slide":
+            yield from _pull_drawer(ctx, joint) if opening else _push_drawer(ctx, joint)
         else:
-            yield from _swing_door(ctx, joint, opening=True)
+            yield from _swing_door(ctx, joint, opening=opening)
+
+
+def open_part(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:
+    return _operate_part(ctx, conjunct, opening=True)
 
 
 def close_part(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:
-    env = ctx.scene.env
-    joint = part_joint(env, conjunct[1])
-    if joint is None:
-        raise ValueError(f"{conjunct}: no joint to close in task {env.task.task_id}")
-    for _ in range(ctx.max_attempts):
-        if env.object_state(conjunct[1]).is_close():
-            return
-        fr = env.joint_frame(joint)
-        if fr["kind"] == "slide":
-            yield from _push_drawer(ctx, joint)
-        else:
-            yield from _swing_door(ctx, joint, opening=False)
+    return _operate_part(ctx, conjunct, opening=False)
 
 
 def _pull_drawer(ctx: Ctx, joint: str) -> Plan:
