@@ -3,9 +3,9 @@
 Inputs: the run folder and a path relative to it (as stored in an item's context).
 Outputs: a resolved path inside the run folder, or None; evidence and frame tables as
 JSON-ready columns.
-Invariants: nothing outside the run folder is ever served, whatever the request says
-(`..`, absolute paths, symlinks pointing out, NUL bytes): `safe_path` returns None and the
-API answers 404. Tables are cached by (path, mtime, size), so a rewritten file is reread.
+Invariants: nothing outside the run's stage1/ and stage2/ folders is ever served, whatever
+the request says (`..`, absolute paths, symlinks pointing out, NUL bytes, the exported
+labels under stage3/): `safe_path` returns None and the API answers 404. Tables are cached by (path, mtime, size), so a rewritten file is reread.
 """
 
 from __future__ import annotations
@@ -15,6 +15,9 @@ from functools import lru_cache
 from pathlib import Path
 
 ALLOWED_SUFFIXES = {".mp4", ".webm", ".parquet", ".png", ".jpg", ".json"}
+# only the raw episode data and its simulator evidence: stage 3 holds the exported labels
+# (every reviewer's values), which a reviewer must never see
+ALLOWED_FOLDERS = ("stage1", "stage2")
 
 
 def safe_path(run_dir: Path, rel: str) -> Path | None:
@@ -25,7 +28,9 @@ def safe_path(run_dir: Path, rel: str) -> Path | None:
         target = (root / rel).resolve(strict=True)
     except (OSError, RuntimeError):
         return None
-    if not target.is_relative_to(root) or not target.is_file() or target.suffix.lower() not in ALLOWED_SUFFIXES:
+    if not any(target.is_relative_to(root / folder) for folder in ALLOWED_FOLDERS):
+        return None
+    if not target.is_file() or target.suffix.lower() not in ALLOWED_SUFFIXES:
         return None
     return target
 

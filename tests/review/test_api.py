@@ -52,10 +52,14 @@ def test_a_reviewer_token_gets_403_on_adjudication(server, people, items):
     "/media/..%2F..%2F..%2F..%2Fetc%2Fpasswd",
     "/media/%2Fetc%2Fpasswd",
     "/media/stage3/review.sqlite",
+    "/media/stage3/annotations/libero_spatial/t/episode_e.json",  # other reviewers' values
     "/media/stage2/../../outside.mp4",
 ])
 def test_a_path_traversal_media_request_gets_404(server, people, items, run_dir, path):
     (run_dir.parent / "outside.mp4").write_bytes(b"secret")
+    labels = run_dir / "stage3" / "annotations" / "libero_spatial" / "t" / "episode_e.json"
+    labels.parent.mkdir(parents=True, exist_ok=True)
+    labels.write_text('{"reviews": "secret"}')
     r = client(server, people, "ann").get(path)
     assert r.status_code == 404
     assert b"secret" not in r.content and b"root:" not in r.content
