@@ -15,6 +15,7 @@ import numpy as np
 from pipeline.policies.base import Observation, Policy
 from pipeline.sim import SimEnv
 from pipeline.sim.env import ACTION_DIM
+from pipeline.sim.rotations import mat_to_quat
 
 
 @dataclass
@@ -34,10 +35,7 @@ class EpisodeResult:
 
 def observe(env: SimEnv, policy: Policy, step: int, context: dict | None = None) -> Observation:
     pos, rot = env.eef_pose()
-    import mujoco
-
-    quat = np.empty(4)
-    mujoco.mju_mat2Quat(quat, rot.reshape(-1))
+    quat = mat_to_quat(rot)
     images = {cam: env.render(cam, policy.image_size) for cam in policy.cameras}
     return Observation(
         instruction=env.task.instruction,

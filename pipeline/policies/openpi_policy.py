@@ -25,6 +25,7 @@ import numpy as np
 from pipeline.config import OpenpiPolicyConfig
 from pipeline.errors import EpisodeError, FatalError
 from pipeline.policies.base import Observation
+from pipeline.sim.rotations import mat_to_quat, quat_to_mat
 
 # grip-site frame -> hand-body frame of robosuite's Panda (a fixed 90 deg turn about z)
 _SITE_TO_HAND = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
@@ -40,13 +41,7 @@ def quat_xyzw_to_axis_angle(q: np.ndarray) -> np.ndarray:
 
 
 def _hand_quat_from_site(quat_wxyz: np.ndarray) -> np.ndarray:
-    import mujoco
-
-    rot = np.empty(9)
-    mujoco.mju_quat2Mat(rot, np.asarray(quat_wxyz, dtype=np.float64))
-    hand = rot.reshape(3, 3) @ _SITE_TO_HAND
-    q = np.empty(4)
-    mujoco.mju_mat2Quat(q, hand.reshape(-1))
+    q = mat_to_quat(quat_to_mat(quat_wxyz) @ _SITE_TO_HAND)
     return np.array([q[1], q[2], q[3], q[0]])
 
 

@@ -17,7 +17,6 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
-import mujoco
 import numpy as np
 import pyarrow.parquet as pq
 from rich.console import Console
@@ -29,6 +28,7 @@ from pipeline.errors import ConfigError
 from pipeline.records import read_episodes
 from pipeline.release import lerobot_format as fmt
 from pipeline.sim import EnvCache, SimEnv, get_task
+from pipeline.sim.rotations import mat_to_quat
 
 
 @dataclass
@@ -42,8 +42,7 @@ class ExportEpisode:
 
 
 def axis_angle(rot: np.ndarray) -> np.ndarray:
-    q = np.empty(4)
-    mujoco.mju_mat2Quat(q, np.asarray(rot, dtype=np.float64).reshape(-1))
+    q = mat_to_quat(rot)
     if q[0] < 0:  # same rotation, angle kept in [0, pi]
         q = -q
     s = np.sqrt(max(1.0 - q[0] ** 2, 0.0))

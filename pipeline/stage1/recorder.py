@@ -15,7 +15,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import mujoco
 import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
@@ -24,12 +23,7 @@ from pipeline.atomic import write_with
 from pipeline.records import STEP_SCHEMA
 from pipeline.rollout import StepInfo
 from pipeline.sim import SimEnv
-
-
-def _quat(rot: np.ndarray) -> np.ndarray:
-    q = np.empty(4)
-    mujoco.mju_mat2Quat(q, rot.reshape(-1))
-    return q
+from pipeline.sim.rotations import mat_to_quat
 
 
 class EpisodeRecorder:
@@ -48,7 +42,7 @@ class EpisodeRecorder:
         pos, rot = self.env.eef_pose()
         self.states.append(self.env.get_state())
         self.eef_pos.append(pos)
-        self.eef_quat.append(_quat(rot))
+        self.eef_quat.append(mat_to_quat(rot))
         self.gripper.append(self.env.gripper_qpos())
 
     def on_step(self, info: StepInfo) -> None:
