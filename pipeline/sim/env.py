@@ -422,6 +422,17 @@ class SimEnv:
             r = self._renderers[(size, quality)] = FrameRenderer(self.env.sim.model._model, size, quality)
         return r.render(self.env.sim.data._data, camera)
 
+    def render_states(self, states: np.ndarray, cameras: list[str], size: int,
+                      quality: str = "standard") -> dict[str, np.ndarray]:
+        """(k, S, S, 3) uint8 frames per camera of k logged states, in order (leaves the
+        env at the last state)."""
+        frames: dict[str, list[np.ndarray]] = {cam: [] for cam in cameras}
+        for state in states:
+            self.set_state(state)
+            for cam in cameras:
+                frames[cam].append(self.render(cam, size, quality))
+        return {cam: np.asarray(f, dtype=np.uint8).reshape(len(states), size, size, 3) for cam, f in frames.items()}
+
     def project(self, camera: str, size: int, points: np.ndarray) -> np.ndarray:
         """Pixel (column, row) of world points in a `size`x`size` image of `camera`, row 0 at
         the top, as `render` draws them (pinhole model from MuJoCo's camera pose and fovy)."""

@@ -68,7 +68,7 @@ class Mp4Writer:
 
 
 def write_videos(
-    frames: dict[str, list[np.ndarray]], steps: list[int], folder: Path, fps: int
+    frames: dict[str, np.ndarray | list[np.ndarray]], steps: list[int], folder: Path, fps: int
 ) -> dict[str, str]:
     """Encode already-rendered frames (camera -> list of HxWx3) plus the frame table."""
     folder = Path(folder)
@@ -94,11 +94,7 @@ def render_videos(
 ) -> dict[str, str]:
     """Render `cameras` from logged states at `fps`; return camera -> file name."""
     steps = frame_steps(len(states) - 1, fps)
-    frames: dict[str, list[np.ndarray]] = {c: [] for c in cameras}
-    for s in steps:
-        env.set_state(states[s])
-        for c in cameras:
-            frames[c].append(env.render(c, size, quality))
+    frames = env.render_states(states[steps], cameras, size, quality)
     return write_videos(frames, steps, Path(folder), fps)
 
 

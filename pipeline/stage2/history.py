@@ -49,16 +49,7 @@ def build_history(states: np.ndarray, step_rows: dict[str, np.ndarray], onset: i
 
 def render_frames(env, history: dict[str, np.ndarray], cameras: list[str], size: int) -> dict[str, np.ndarray]:
     """Frames of a history's states, one (k, S, S, 3) array per camera (plus `steps`)."""
-    frames: dict[str, list] = {cam: [] for cam in cameras}
-    for state in history["sim_states"]:
-        env.set_state(state)
-        for cam in cameras:
-            frames[cam].append(env.render(cam, size))
-    k = len(history["sim_states"])
-    out = {"steps": history["steps"]}
-    for cam in cameras:
-        out[cam] = np.asarray(frames[cam], dtype=np.uint8).reshape(k, size, size, 3)
-    return out
+    return {"steps": history["steps"], **env.render_states(history["sim_states"], cameras, size)}
 
 
 def write_history(path: Path, history: dict[str, np.ndarray]) -> None:
