@@ -16,6 +16,14 @@ Steps, in order:
    that disagree -> `ambiguous`; no valid one -> the first object's problem (`schema`, or
    `out_of_range` for a time outside the video).
 
+Bounds (the parser never raises on any string, issue 12):
+- Answer text longer than `MAX_ANSWER_CHARS` is `schema` without being scanned; JSON nested
+  deeper than `MAX_DEPTH` is not decoded; an integer of more than `_MAX_INT_DIGITS` digits
+  becomes infinity (then `schema`) instead of hitting Python's int-conversion limit.
+- A key repeated with different values in one object (`{"fail": 2.0, "fail": 9.0}`) is
+  `ambiguous`: JSON decoders keep the last one silently, and which one the model meant is
+  unknowable. A key repeated with the same value is harmless.
+
 Decisions (the issue was silent):
 - More than one decimal is ROUNDED half-up to 0.1 s, not rejected: the raw text keeps the
   original, and rejecting would quarantine answers whose meaning is clear.
@@ -50,6 +58,9 @@ END_MARKERS = ("</think>", "</thinking>", "</reasoning>", "<|end_of_thought|>")
 START_MARKERS = ("<think>", "<thinking>", "<reasoning>", "<|begin_of_thought|>")
 RANGE_SLACK_S = 0.05  # half the answer resolution
 _MAX_OBJECT_STARTS = 500  # bound the scan on pathological outputs
+MAX_ANSWER_CHARS = 20_000  # a real answer is under 1 kB; the thinking is cut off before this
+MAX_DEPTH = 32  # real answers nest 1-2 levels; Python's decoder recurses per level
+_MAX_INT_DIGITS = 400  # far below Python's 4300-digit int-conversion limit
 _QUOTES = str.maketrans({"“": '"', "”": '"', "„": '"', "‘": "'", "’": "'", "「": '"', "」": '"'})
 _NUMBER_STR = re.compile(r"^\s*([+-]?\d+(?:\.\d+)?)\s*(?:s|sec|secs|seconds?|秒)?\s*$", re.IGNORECASE)
 
@@ -77,10 +88,50 @@ def answer_text(raw: str) -> tuple[str | None, Quarantine | None]:
     return text.strip(), None
 
 
-def find_json_objects(text: str) -> list[dict]:
-    """Every top-level-or-nested JSON object in `text`, in order of its opening brace."""
-    # NaN / Infinity decode to float so validation can name the problem
-    decoder = json.JSONDecoder(parse_constant=lambda c: float(c.replace("Infinity", "inf")))
+class _DuplicateKey(ValueError):
+    pass
+
+
+def _no_conflicting_keys(pairs: list[tuple[str, object]]) -> dict:
+    obj: dict = {}
+    for key, value in pairs:
+        if key in obj and obj[key] != value:
+            shown = f"{json.dumps(obj[key], ensure_ascii=False)} and {json.dumps(value, ensure_ascii=False)}"
+            raise _DuplicateKey(f"key {key!r} given twice with different values ({shown[:200]})")
+        obj[key] = value
+    return obj
+
+
+def _int(digits: str) -> int | float:
+    return int(digits) if len(digits) <= _MAX_INT_DIGITS else float(digits)  # float: inf, never raises
+
+
+def max_nesting(text: str) -> int:
+    """Deepest bracket nesting in `text`, counting brackets inside strings too (an upper bound)."""
+    depth = deepest = 0
+    for ch in text:
+        if ch in "[{":
+            depth += 1
+            deepest = max(deepest, depth)
+        elif ch in "]}":
+            depth = max(depth - 1, 0)
+    return deepest
+
+
+def find_json_objects(text: str, duplicates: list[str] | None = None) -> list[dict]:
+    """Every top-level-or-nested JSON object in `text`, in order of its opening brace.
+
+    Objects that repeat a key with different values are not returned; their description is
+    appended to `duplicates` when given.
+    """
+    if max_nesting(text) > MAX_DEPTH:
+        return []  # callers report no_json; deep nesting is never a real answer
+    decoder = json.JSONDecoder(
+        # NaN / Infinity decode to float so validation can name the problem
+        parse_constant=lambda c: float(c.replace("Infinity", "inf")),
+        parse_int=_int,
+        object_pairs_hook=_no_conflicting_keys,
+    )
     found: list[dict] = []
     start = text.find("{")
     tries = 0
@@ -90,8 +141,11 @@ def find_json_objects(text: str) -> list[dict]:
             obj, _ = decoder.raw_decode(text, start)
             if isinstance(obj, dict):
                 found.append(obj)
-        except json.JSONDecodeError:
-            pass
+        except _DuplicateKey as dup:
+            if duplicates is not None and str(dup) not in duplicates:
+                duplicates.append(str(dup))
+        except (json.JSONDecodeError, RecursionError, ValueError):
+            pass  # not JSON at this brace; the bounds above keep RecursionError theoretical
         start = text.find("{", start + 1)
     return found
 
@@ -162,7 +216,11 @@ def validate_characterization(obj: dict) -> CharacterizationAnswer:
     )
 
 
-def _decide(objects: list[dict], check: Callable[[dict], Answer]) -> Validated:
+def _decide(text: str, check: Callable[[dict], Answer]) -> Validated:
+    duplicates: list[str] = []
+    objects = find_json_objects(text, duplicates)
+    if duplicates:
+        return None, QuarantineReason.ambiguous, "; ".join(duplicates[:3])
     answers: list[Answer] = []
     first_problem: _Problem | None = None
     for obj in objects:
@@ -195,13 +253,16 @@ def _parse(result: VLMResult | str, check: Callable[[dict], Answer]) -> Answer |
     text, problem = answer_text(raw)
     if problem:
         return problem
+    if len(text) > MAX_ANSWER_CHARS:
+        detail = f"answer text is {len(text)} characters, more than {MAX_ANSWER_CHARS}"
+        return Quarantine(reason=QuarantineReason.schema, detail=detail, raw_text=raw)
     # the scan's first object is the whole text when the text is strict JSON; nested and
     # later objects follow, so `{"answer": {"fail": 4.0}}` still yields the inner answer
-    verdict = _decide(find_json_objects(text), check)
+    verdict = _decide(text, check)
     if verdict[0] is None:
         repaired = repair(text)
         if repaired != text:
-            second = _decide(find_json_objects(repaired), check)
+            second = _decide(repaired, check)
             if second[0] is not None or verdict[1] is QuarantineReason.no_json:
                 verdict = second
     answer, reason, detail = verdict

@@ -102,3 +102,38 @@ def test_answer_text_takes_text_after_the_last_marker():
 
 def test_find_json_objects_skips_braces_inside_strings():
     assert find_json_objects('x {"a": "}{", "b": 1} y') == [{"a": "}{", "b": 1}]
+
+
+# -- bounds (issue 12): the three strings that raised or silently chose on the landed parser
+
+
+def test_a_five_thousand_digit_number_is_quarantined_not_raised():
+    out = parse_localization('{"fail": 1' + "0" * 5000 + "}", 10.0)
+    assert isinstance(out, Quarantine) and out.reason is QuarantineReason.schema
+
+
+def test_five_thousand_nested_brackets_are_quarantined_not_raised():
+    out = parse_localization('{"fail": ' + "[" * 5000, 10.0)
+    assert isinstance(out, Quarantine) and out.reason is QuarantineReason.no_json
+
+
+def test_a_key_repeated_with_different_values_is_ambiguous():
+    out = parse_localization('{"fail": 2.0, "fail": 9.0}', 10.0)
+    assert isinstance(out, Quarantine) and out.reason is QuarantineReason.ambiguous
+    assert "'fail'" in out.detail and "2.0" in out.detail and "9.0" in out.detail
+
+
+def test_a_key_repeated_with_the_same_value_is_harmless():
+    assert parse_localization('{"fail": 2.0, "fail": 2.0}', 10.0) == LocalizationAnswer(fail=2.0)
+
+
+def test_a_repeated_key_in_a_characterization_is_ambiguous():
+    raw = '{"recovery_level": "L1", "recovery_level": "L3", "failure_category": "grasp_failure", "recovery_action": "x"}'
+    out = parse_characterization(raw)
+    assert isinstance(out, Quarantine) and out.reason is QuarantineReason.ambiguous
+
+
+def test_an_oversized_answer_is_quarantined_without_scanning():
+    out = parse_localization('{"fail": 2.0}' + " " * 30_000 + "x", 10.0)
+    assert isinstance(out, Quarantine) and out.reason is QuarantineReason.schema
+    assert "characters" in out.detail
