@@ -1,25 +1,68 @@
 """Run configuration: one YAML file, validated once at the edge into pydantic models.
 
 Every section forbids unknown keys, so a typo fails before any work with the file, the
-dotted key and the reason. The resolved config is saved beside each stage's outputs
+dotted key and the reason. Scalars are strict where YAML's coercions would hide a mistake
+(`horizon: true` is not 1, `stop_on_success: 1` is not true); an empty file is an error,
+not the full default run; repeated suites, task names or init states are refused. The resolved config is saved beside each stage's outputs
 (`save_resolved`), so a run can always be traced back to what produced it.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Literal
+from typing import Literal, Union, get_args, get_origin
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    PrivateAttr,
+    ValidationError,
+    ValidationInfo,
+    field_validator,
+    model_validator,
+)
 
 from pipeline.errors import ConfigError
 
 SUITES = ("libero_spatial", "libero_object", "libero_goal", "libero_10", "libero_90")
 
 
+def _scalar_types(annotation) -> set:
+    """The plain types an annotation admits: `int | None` -> {int, NoneType}."""
+    if get_origin(annotation) in (Union, type(int | None)):
+        return set().union(*(_scalar_types(a) for a in get_args(annotation)))
+    return {annotation}
+
+
+def _check_scalar(value, types: set) -> None:
+    numeric = bool(types & {int, float})
+    if isinstance(value, bool) and numeric and bool not in types:
+        raise ValueError(f"must be a number, got {str(value).lower()}")
+    if bool in types and not isinstance(value, bool) and not (value is None and type(None) in types):
+        raise ValueError(f"must be true or false, got {value!r}")
+
+
+def _repeats(values: list) -> list:
+    seen: set = set()
+    return sorted({v for v in values if v in seen or seen.add(v)}, key=str)
+
+
 class _Strict(BaseModel):
     model_config = ConfigDict(extra="forbid", frozen=True)
+
+    @field_validator("*", mode="before")
+    @classmethod
+    def _no_bool_number_coercion(cls, value, info: ValidationInfo):
+        annotation = cls.model_fields[info.field_name].annotation
+        if get_origin(annotation) is list and isinstance(value, list):
+            item_types = _scalar_types(get_args(annotation)[0])
+            for item in value:
+                _check_scalar(item, item_types)
+        else:
+            _check_scalar(value, _scalar_types(annotation))
+        return value
 
 
 class RunConfig(_Strict):
@@ -43,6 +86,14 @@ class TaskSelection(_Strict):
         bad = [s for s in v if s not in SUITES]
         if bad:
             raise ValueError(f"unknown suite(s) {bad}; choose from {list(SUITES)}")
+        return v
+
+    @field_validator("suites", "tasks", "init_states")
+    @classmethod
+    def _no_repeats(cls, v: list | None) -> list | None:
+        # a repeat would plan the same episode twice under one id: it could never be done
+        if v is not None and _repeats(v):
+            raise ValueError(f"repeated {_repeats(v)}; list each once")
         return v
 
     @field_validator("init_states")
@@ -244,6 +295,7 @@ class EvalConfig(_Strict):
 
 
 class Config(_Strict):
+    _source: Path | None = PrivateAttr(default=None)  # the file it was read from, for errors
     run: RunConfig = RunConfig()
     tasks: TaskSelection = TaskSelection()
     executor: ExecutorConfig = ExecutorConfig()
@@ -264,6 +316,15 @@ class Config(_Strict):
     def out(self) -> Path:
         return Path(self.run.output_dir)
 
+    def __eq__(self, other: object) -> bool:  # where it was read from is not what it says
+        return isinstance(other, Config) and self.__dict__ == other.__dict__
+
+    __hash__ = _Strict.__hash__
+
+    def error(self, key: str, message: str) -> ConfigError:
+        """A ConfigError for a check that needs more than the file (e.g. LIBERO's task names)."""
+        return ConfigError(f"{self._source or '<config>'}: invalid configuration\n  {key}: {message}")
+
 
 def _format_errors(path: Path, err: ValidationError) -> str:
     lines = [f"{path}: invalid configuration"]
@@ -280,11 +341,14 @@ def load_config(path: str | Path, overrides: dict | None = None) -> Config:
     """Read and validate a YAML config; raise ConfigError naming the file and key."""
     path = Path(path)
     try:
-        raw = yaml.safe_load(path.read_text()) or {}
+        raw = yaml.safe_load(path.read_text())
     except FileNotFoundError:
         raise ConfigError(f"{path}: no such config file") from None
     except yaml.YAMLError as e:
         raise ConfigError(f"{path}: not valid YAML: {e}") from None
+    if raw is None or raw == {}:
+        # an empty file would otherwise mean "all defaults": the full 6,500-episode run
+        raise ConfigError(f"{path}: empty config; give at least one section (e.g. `run: {{name: my-run}}`)")
     if not isinstance(raw, dict):
         raise ConfigError(f"{path}: top level must be a mapping, got {type(raw).__name__}")
     for dotted, value in (overrides or {}).items():
@@ -294,9 +358,11 @@ def load_config(path: str | Path, overrides: dict | None = None) -> Config:
             node = node.setdefault(p, {})
         node[leaf] = value
     try:
-        return Config.model_validate(raw)
+        cfg = Config.model_validate(raw)
     except ValidationError as e:
         raise ConfigError(_format_errors(path, e)) from None
+    cfg._source = path
+    return cfg
 
 
 def save_resolved(cfg: Config, directory: str | Path, name: str = "config.resolved.yaml") -> Path:

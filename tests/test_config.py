@@ -68,3 +68,52 @@ def test_resolved_config_round_trips(tmp_path):
     assert cfg.run.seed == 7
     path = save_resolved(cfg, tmp_path)
     assert load_config(path) == cfg
+
+
+# -- issue 12: inputs the landed loader accepted silently
+
+
+def test_an_empty_file_is_an_error_not_the_full_default_run(tmp_path):
+    for text in ("", "# only a comment\n", "{}\n"):
+        with pytest.raises(ConfigError, match="empty config") as e:
+            load_config(_write(tmp_path, text))
+        assert "cfg.yaml" in str(e.value)
+
+
+@pytest.mark.parametrize(
+    ("data", "key"),
+    [
+        ({"stage1": {"rollout": {"horizon": True}}}, "stage1.rollout.horizon"),
+        ({"stage3": {"vlm": {"sampling": {"fps": False}}}}, "stage3.vlm.sampling.fps"),
+        ({"tasks": {"max_tasks_per_suite": True}}, "tasks.max_tasks_per_suite"),
+        ({"tasks": {"init_states": [0, True]}}, "tasks.init_states"),
+        ({"stage1": {"rollout": {"stop_on_success": 1}}}, "stage1.rollout.stop_on_success"),
+        ({"stage1": {"rollout": {"stop_on_success": "yes"}}}, "stage1.rollout.stop_on_success"),
+    ],
+)
+def test_booleans_and_numbers_are_not_coerced_into_each_other(tmp_path, data, key):
+    with pytest.raises(ConfigError, match=key.replace(".", r"\.")) as e:
+        load_config(_write(tmp_path, data))
+    assert "must be" in str(e.value)
+
+
+def test_optional_booleans_still_accept_null_and_booleans(tmp_path):
+    cfg = load_config(_write(tmp_path, {"stage2": {"vlm": {"openai": {"enable_thinking": None}}}}))
+    assert cfg.stage2.vlm.openai.enable_thinking is None
+    cfg = load_config(_write(tmp_path, {"stage2": {"vlm": {"openai": {"enable_thinking": False}}}}))
+    assert cfg.stage2.vlm.openai.enable_thinking is False
+
+
+@pytest.mark.parametrize(
+    ("key", "value"),
+    [("init_states", [0, 1, 1]), ("suites", ["libero_goal", "libero_goal"]), ("tasks", ["a", "a"])],
+)
+def test_repeated_selections_are_refused(tmp_path, key, value):
+    with pytest.raises(ConfigError, match=rf"tasks\.{key}: .*repeated"):
+        load_config(_write(tmp_path, {"tasks": {key: value}}))
+
+
+def test_config_remembers_its_file_for_later_errors(tmp_path):
+    p = _write(tmp_path, {"run": {"name": "x"}})
+    err = load_config(p).error("tasks.tasks", "unknown task name(s) ['nope']")
+    assert isinstance(err, ConfigError) and str(p) in str(err) and "tasks.tasks" in str(err)

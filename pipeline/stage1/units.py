@@ -73,9 +73,16 @@ def selected_tasks(cfg: Config):
     """The TaskSpecs the config selects, in registry order."""
     from pipeline.sim.registry import tasks
 
+    names = cfg.tasks.tasks
+    if names:
+        # a name belongs to one suite: check it against all listed suites, then filter each
+        known = {t.name for t in tasks(cfg.tasks.suites)}
+        missing = [n for n in names if n not in known]
+        if missing:
+            raise cfg.error("tasks.tasks", f"unknown task name(s) {missing} in suites {cfg.tasks.suites}")
     out = []
     for suite in cfg.tasks.suites:
-        chosen = tasks([suite], cfg.tasks.tasks) if cfg.tasks.tasks else tasks([suite])
+        chosen = [t for t in tasks([suite]) if not names or t.name in names]
         if cfg.tasks.max_tasks_per_suite is not None:
             chosen = chosen[: cfg.tasks.max_tasks_per_suite]
         out.extend(chosen)

@@ -57,3 +57,26 @@ def test_a_single_task_is_split_so_every_worker_has_work():
     shards = make_shards(_units(1, 5), workers=2)
     assert sorted(len(s.units) for s in shards) == [2, 3]
     assert make_shards([], workers=2) == []
+
+
+def test_a_task_is_selected_by_name_when_two_suites_are_listed():
+    from pipeline.stage1.units import selected_tasks
+
+    cfg = _cfg(suites=["libero_goal", "libero_spatial"], tasks=["open_the_middle_drawer_of_the_cabinet"])
+    chosen = selected_tasks(cfg)
+    assert [(t.suite, t.name) for t in chosen] == [("libero_goal", "open_the_middle_drawer_of_the_cabinet")]
+
+
+def test_an_unknown_task_name_is_a_config_error_naming_the_key(tmp_path):
+    import pytest
+    import yaml
+
+    from pipeline.config import load_config
+    from pipeline.errors import ConfigError
+    from pipeline.stage1.units import selected_tasks
+
+    path = tmp_path / "c.yaml"
+    path.write_text(yaml.safe_dump({"tasks": {"suites": ["libero_goal"], "tasks": ["no_such_task"]}}))
+    with pytest.raises(ConfigError, match=r"tasks\.tasks: unknown task name\(s\) \['no_such_task'\]") as e:
+        selected_tasks(load_config(path))
+    assert str(path) in str(e.value)
