@@ -5,7 +5,8 @@ Checks per scene: files exist and match the manifest's SHA-256; LIBERO's parser 
 BDDL; objects of one type share one declaration line; the npy loads and has the model's
 state length; the scene restores exactly; the goal does not hold; no object moves more than
 `settle_threshold_m` in `settle_check_steps` zero-action steps. Also: no scene file on disk
-is missing from the manifest. Scenes are grouped by task (and BDDL model signature), so each
+is missing from the manifest, and nothing sits at the top level that a release does not
+write (`TOP_LEVEL`). Scenes are grouped by task (and BDDL model signature), so each
 environment is built once. Output: a per-scene table and every problem, each naming its file;
 `main` returns 1 if there is any problem, else 0.
 """
@@ -27,6 +28,11 @@ from pipeline.release.scene_physics import check_goal_unsatisfied, check_restore
 from pipeline.sim import SimEnv
 
 CHECKS = ("files", "checksum", "bddl", "state", "restore", "goal", "settled")
+# what `recover release` writes at the top of a release folder (build.py); anything else is
+# stray, e.g. a file dropped in by hand that SHA256SUMS and the manifest would not cover
+TOP_LEVEL_FILES = {MANIFEST_NAME, "README.md", "SHA256SUMS"}
+TOP_LEVEL_DIRS = {"_build", "figures"}
+SCENE_DIR_PREFIX = "selected_bddl_scenes_"
 
 
 @dataclass
@@ -105,10 +111,22 @@ def verify_release(directory: Path, cfg: ReleaseConfig | None = None) -> tuple[l
                 rep.record("settled", check_settled(env, spath, cfg.settle_check_steps, cfg.settle_threshold_m))
 
     listed = {rel for row in rows for rel, _ in row.files()}
-    stray = sorted(str(p.relative_to(directory)) for d in directory.glob("selected_bddl_scenes_*")
+    stray = sorted(str(p.relative_to(directory)) for d in directory.glob(f"{SCENE_DIR_PREFIX}*")
                    for p in d.rglob("*") if p.is_file())
     set_problems = [f"{directory / rel}: scene file not listed in the manifest" for rel in stray if rel not in listed]
-    return reports, set_problems
+    return reports, set_problems + top_level_problems(directory)
+
+
+def top_level_problems(directory: Path) -> list[str]:
+    """Every top-level entry of the release that `recover release` does not write."""
+    problems = []
+    for p in sorted(directory.iterdir()):
+        if p.is_dir() and not p.is_symlink() and (p.name in TOP_LEVEL_DIRS or p.name.startswith(SCENE_DIR_PREFIX)):
+            continue
+        if p.is_file() and not p.is_symlink() and p.name in TOP_LEVEL_FILES:
+            continue
+        problems.append(f"{p}: not part of a release (stray {'folder' if p.is_dir() else 'file'} at the top level)")
+    return problems
 
 
 def print_report(reports: list[SceneReport], set_problems: list[str], console: Console) -> None:

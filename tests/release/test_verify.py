@@ -131,3 +131,16 @@ def test_verify_main_exits_nonzero_and_prints_every_problem(checked, capsys, mon
 def test_verify_reports_a_missing_manifest(tmp_path: Path):
     reports, set_problems = verify_release(tmp_path)
     assert reports == [] and set_problems == [f"{tmp_path / 'scenarios.parquet'}: manifest missing"]
+
+
+def test_verify_flags_a_stray_file_at_the_top_level_naming_it(checked):
+    out = checked[0]
+    stray = out / "notes.txt"
+    stray.write_text("not part of the release")
+    try:
+        _, set_problems = verify_release(out)
+        assert set_problems == [f"{stray}: not part of a release (stray file at the top level)"]
+        assert main(out) == 1
+    finally:
+        stray.unlink()
+    assert verify_release(out)[1] == []
