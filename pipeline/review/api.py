@@ -8,7 +8,9 @@ Outputs: a FastAPI app. Routes (all JSON unless noted):
   GET  /api/items/{id}/evidence, /frames                GET  /api/items/{id}/history
   GET  /api/items/{id}/adjudication   POST .../claim    POST .../adjudication
   GET  /api/status           GET /media/<path under the run folder> (file)   GET / (the page)
-Invariants: every route but login and the page needs a user; writes through the cookie
+Invariants: every route but login and the page needs a user (the OpenAPI docs too, and
+only with `docs=True`); an item's reviews (adjudication, history) stay hidden while they
+are being collected, and whoever has read them can no longer review that episode; writes through the cookie
 need the CSRF header; errors are `{"detail", "field"?, "current"?}` with 401/403/404/409/422;
 a request body that fails the schema is a 422 whose `field` names the bad field.
 """
@@ -28,7 +30,7 @@ from sqlalchemy.engine import Engine
 
 from pipeline.records import Category, Level
 from pipeline.review import adjudication, audit, auth, media, views, workflow
-from pipeline.review.db import Review, read_session, write_session
+from pipeline.review.db import COLLECTING, Item, Review, read_session, write_session
 from pipeline.review.errors import Forbidden, NotFound, ReviewError
 from pipeline.review.workflow import QueueSettings
 
@@ -82,9 +84,11 @@ def _validation_error(_req: Request, exc: RequestValidationError) -> JSONRespons
     return JSONResponse(status_code=422, content={"detail": first["msg"], "field": first["field"], "errors": errors})
 
 
-def create_app(run_dir: str | Path, engine: Engine, settings: QueueSettings, ui_dir: Path = UI_DIR) -> FastAPI:
+def create_app(run_dir: str | Path, engine: Engine, settings: QueueSettings, ui_dir: Path = UI_DIR,
+               docs: bool = False) -> FastAPI:
     run_dir = Path(run_dir).resolve()
-    app = FastAPI(title="libero-recover review", docs_url="/api/docs", openapi_url="/api/openapi.json")
+    # FastAPI's own docs routes answer anyone; ours (below, with docs=True) need a user
+    app = FastAPI(title="libero-recover review", docs_url=None, redoc_url=None, openapi_url=None)
     app.add_exception_handler(RequestValidationError, _validation_error)
     app.add_exception_handler(ReviewError, lambda _r, e: JSONResponse(status_code=e.status, content=e.body()))
 
@@ -106,6 +110,17 @@ def create_app(run_dir: str | Path, engine: Engine, settings: QueueSettings, ui_
     def adjudicator(p: auth.Principal = Depends(who)) -> auth.Principal:
         auth.require_role(p.user, "adjudicator")
         return p
+
+    if docs:
+        from fastapi.openapi.docs import get_swagger_ui_html
+
+        @app.get("/api/openapi.json", include_in_schema=False)
+        def openapi(_p: auth.Principal = Depends(who)):
+            return JSONResponse(app.openapi())
+
+        @app.get("/api/docs", include_in_schema=False)
+        def api_docs(_p: auth.Principal = Depends(who)):
+            return get_swagger_ui_html(openapi_url="/api/openapi.json", title=app.title)
 
     @app.post("/api/login")
     def login(body: LoginIn, request: Request):
@@ -181,16 +196,25 @@ def create_app(run_dir: str | Path, engine: Engine, settings: QueueSettings, ui_
             return {"replayed": replayed, "version": r.version, "decision": r.decision, "values": r.values,
                     "state": "open" if item.status in ("pending", "leased", "reviewed") else "closed"}
 
-    def _not_reviewer(s, p: auth.Principal, item_id: int):
+    def _reviews_visible(s, p: auth.Principal, item_id: int, whole_episode: bool = False):
+        # blindness: nobody reads an item's reviews while they are being collected, nobody
+        # reads the others' decisions on an item they reviewed, and whoever reads them is
+        # recorded so that they can no longer review that episode (workflow.read_reviews)
         item = workflow.get_item(s, item_id)
-        if s.scalar(select(Review.id).where(Review.item_id == item_id, Review.reviewer_id == p.user.id)):
-            raise Forbidden(f"you reviewed item {item_id}; its other decisions stay hidden from you")
+        keys = [item.key] if whole_episode else []
+        if item.status in COLLECTING or (keys and s.scalar(select(Item.id).where(Item.key.in_(keys),
+                                                                                   Item.status.in_(COLLECTING)))):
+            raise Forbidden(f"item {item_id}: reviews are still being collected; they stay hidden until then")
+        if auth.rank(p.user.role) < auth.rank("admin") or not whole_episode:
+            if s.scalar(select(Review.id).where(Review.item_id == item_id, Review.reviewer_id == p.user.id)):
+                raise Forbidden(f"you reviewed item {item_id}; its other decisions stay hidden from you")
+        workflow.note_reviews_read(s, p.user, item)
         return item
 
     @app.get("/api/items/{item_id}/adjudication")
     def adjudication_page(item_id: int, p: auth.Principal = Depends(adjudicator)):
-        with read_session(engine) as s:
-            return JSONResponse(views.adjudication_view(s, _not_reviewer(s, p, item_id)))
+        with write_session(engine) as s:
+            return JSONResponse(views.adjudication_view(s, _reviews_visible(s, p, item_id)))
 
     @app.post("/api/items/{item_id}/claim")
     def claim(item_id: int, p: auth.Principal = Depends(adjudicator)):
@@ -208,9 +232,8 @@ def create_app(run_dir: str | Path, engine: Engine, settings: QueueSettings, ui_
 
     @app.get("/api/items/{item_id}/history")
     def history(item_id: int, p: auth.Principal = Depends(adjudicator)):
-        with read_session(engine) as s:
-            if auth.rank(p.user.role) < auth.rank("admin"):
-                _not_reviewer(s, p, item_id)
+        with write_session(engine) as s:  # the history spans every revision of the episode
+            _reviews_visible(s, p, item_id, whole_episode=True)
             return {"item": item_id, "events": audit.history(s, item_id)}
 
     @app.get("/api/status")

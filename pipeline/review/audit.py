@@ -5,7 +5,8 @@ Outputs: `events` rows (who, when, kind, before, after, the item's model/prompt 
 Invariants: events are only ever inserted, in the same transaction as the change they
 describe (so a rolled-back change leaves no event); on SQLite, triggers abort any UPDATE
 or DELETE of an event. Event kinds: enqueued, revision, leased, review, review_changed,
-status, claimed, adjudicated, user_added.
+status, claimed, adjudicated, user_added, reviews_read (an adjudicator or admin
+opened an item's reviews), user_deactivated, user_reactivated.
 """
 
 from __future__ import annotations

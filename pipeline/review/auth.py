@@ -25,7 +25,7 @@ from sqlalchemy.engine import Engine
 from sqlalchemy.orm import Session
 
 from pipeline.review import audit
-from pipeline.review.db import User, WebSession, now, read_session, write_session
+from pipeline.review.db import Lease, User, WebSession, now, read_session, write_session
 from pipeline.review.errors import Forbidden, ReviewError
 
 ROLES = ("reviewer", "adjudicator", "admin")
@@ -71,6 +71,30 @@ def add_user(engine: Engine, name: str, role: str, actor: str = "admin") -> str:
             s.execute(delete(WebSession).where(WebSession.user_id == user.id))
             audit.record(s, actor, "user_token_rotated", None, before, {"name": name, "role": role})
     return token
+
+
+def list_users(engine: Engine) -> list[dict]:
+    """Every person: name, role and whether they may sign in (no token material)."""
+    with read_session(engine) as s:
+        return [{"name": u.name, "role": u.role, "active": u.active} for u in s.scalars(select(User).order_by(User.name))]
+
+
+def set_active(engine: Engine, name: str, active: bool, actor: str = "admin") -> bool:
+    """(De)activate a person; a deactivated person's token and sessions are refused and their
+    leases released. Returns whether anything changed; LookupError if there is no such person."""
+    with write_session(engine) as s:
+        user = s.scalar(select(User).where(User.name == name))
+        if user is None:
+            raise LookupError(f"no reviewer named {name!r}")
+        if user.active == active:
+            return False
+        user.active = active
+        if not active:
+            s.execute(delete(WebSession).where(WebSession.user_id == user.id))
+            s.execute(delete(Lease).where(Lease.user_id == user.id))
+        audit.record(s, actor, "user_reactivated" if active else "user_deactivated", None,
+                     {"name": name, "active": not active}, {"name": name, "active": active})
+    return True
 
 
 def user_by_token(s: Session, token: str) -> User | None:

@@ -31,7 +31,9 @@ def _cfg(path: Path):
 
 @app.command()
 def serve(config: Path = CONFIG, host: str = typer.Option(None, help="default: stage3.host"),
-          port: int = typer.Option(None, help="default: stage3.port")) -> None:
+          port: int = typer.Option(None, help="default: stage3.port"),
+          docs: bool = typer.Option(False, "--docs", help="serve /api/docs and /api/openapi.json (signed-in users only)"),
+          ) -> None:
     """Serve the review web page and API."""
     import uvicorn
 
@@ -40,7 +42,7 @@ def serve(config: Path = CONFIG, host: str = typer.Option(None, help="default: s
     cfg = _cfg(config)
     host, port = host or cfg.stage3.host, port or cfg.stage3.port
     typer.echo(f"review page: http://{host}:{port}/  (run folder {cfg.out})")
-    uvicorn.run(build_app(cfg), host=host, port=port, log_level="info")
+    uvicorn.run(build_app(cfg, docs=docs), host=host, port=port, log_level="info")
 
 
 @app.command("add-reviewer")
@@ -57,6 +59,52 @@ def add_reviewer(name: str = typer.Argument(..., help="a person's name (unique)"
     token = add_user(engine_for(_cfg(config)), name, role, actor="cli")
     typer.echo(f"{name} ({role}) token: {token}")
     typer.echo("Keep it secret: only its hash is stored; run add-reviewer again to replace it.")
+
+
+reviewers = typer.Typer(add_completion=False, no_args_is_help=True, help="List, deactivate or reactivate people.")
+app.add_typer(reviewers, name="reviewers")
+
+
+@reviewers.command("list")
+def reviewers_list(config: Path = CONFIG) -> None:
+    """Every person with their role and whether they may sign in."""
+    from rich.console import Console
+    from rich.table import Table
+
+    from pipeline.review.auth import list_users
+    from pipeline.review.server import engine_for
+
+    table = Table(title="reviewers")
+    for col in ("name", "role", "active"):
+        table.add_column(col)
+    for u in list_users(engine_for(_cfg(config))):
+        table.add_row(u["name"], u["role"], "yes" if u["active"] else "[red]no[/red]")
+    Console(width=120).print(table)
+
+
+def _set_active(name: str, active: bool, config: Path) -> None:
+    from pipeline.review.auth import set_active
+    from pipeline.review.server import engine_for
+
+    try:
+        changed = set_active(engine_for(_cfg(config)), name, active, actor="cli")
+    except LookupError as e:
+        typer.echo(str(e), err=True)
+        raise typer.Exit(2) from None
+    state = "active" if active else "deactivated"
+    typer.echo(f"{name}: {state}" if changed else f"{name} was already {state}")
+
+
+@reviewers.command("deactivate")
+def reviewers_deactivate(name: str = typer.Argument(..., help="the person's name"), config: Path = CONFIG) -> None:
+    """Refuse this person's token and sessions from now on; their leases are released."""
+    _set_active(name, False, config)
+
+
+@reviewers.command("reactivate")
+def reviewers_reactivate(name: str = typer.Argument(..., help="the person's name"), config: Path = CONFIG) -> None:
+    """Accept this person's existing token again."""
+    _set_active(name, True, config)
 
 
 @app.command()

@@ -14,6 +14,8 @@ lock upgrade. Times are UNIX seconds (float).
 
 from __future__ import annotations
 
+import os
+
 import threading
 import time
 from collections.abc import Iterator
@@ -170,7 +172,9 @@ def make_engine(url: str, busy_timeout_ms: int = 10_000) -> Engine:
     """An engine with the tables created; SQLite gets WAL, busy timeout and IMMEDIATE writes."""
     sqlite = url.startswith("sqlite")
     if sqlite and ":memory:" not in url and url.count("/") >= 3:
-        Path(url.split("///", 1)[1]).parent.mkdir(parents=True, exist_ok=True)
+        path = Path(url.split("///", 1)[1].split("?", 1)[0])
+        path.parent.mkdir(parents=True, exist_ok=True)
+        _private_files(path)
     kwargs: dict = {"pool_size": 32, "max_overflow": 16} if not sqlite or ":memory:" not in url else {}
     engine = create_engine(url, connect_args={"timeout": busy_timeout_ms / 1000} if sqlite else {}, **kwargs)
     if sqlite:
@@ -181,6 +185,19 @@ def make_engine(url: str, busy_timeout_ms: int = 10_000) -> Engine:
             for stmt in _APPEND_ONLY:
                 conn.exec_driver_sql(stmt)
     return engine
+
+
+def _private_files(path: Path) -> None:
+    """The database (reviews, token hashes) readable by its owner only: 0600.
+
+    SQLite gives its -wal and -shm files the database file's mode, so creating that file
+    0600 before SQLite opens it covers all three; files of an older run are tightened.
+    """
+    if not path.exists():
+        os.close(os.open(path, os.O_CREAT | os.O_WRONLY, 0o600))  # an empty file is an empty database
+    for p in (path, path.with_name(path.name + "-wal"), path.with_name(path.name + "-shm")):
+        if p.exists() and p.stat().st_mode & 0o077:
+            os.chmod(p, 0o600)
 
 
 def _sqlite_setup(engine: Engine, busy_timeout_ms: int) -> None:

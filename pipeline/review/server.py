@@ -33,10 +33,10 @@ def engine_for(cfg: Config) -> Engine:
     return make_engine(db_url(cfg))
 
 
-def build_app(cfg: Config, engine: Engine | None = None):
+def build_app(cfg: Config, engine: Engine | None = None, docs: bool = False):
     from pipeline.review.api import create_app
 
-    return create_app(Path(cfg.out), engine or engine_for(cfg), settings(cfg))
+    return create_app(Path(cfg.out), engine or engine_for(cfg), settings(cfg), docs=docs)
 
 
 def free_port() -> int:

@@ -21,7 +21,20 @@ from sqlalchemy import and_, delete, exists, func, select, update
 from sqlalchemy.orm import Session
 
 from pipeline.review import audit
-from pipeline.review.db import COLLECTING, CONFLICT, FINAL, LEASED, PENDING, REVIEWED, Item, Lease, Review, User, now
+from pipeline.review.db import (
+    COLLECTING,
+    CONFLICT,
+    FINAL,
+    LEASED,
+    PENDING,
+    REVIEWED,
+    Event,
+    Item,
+    Lease,
+    Review,
+    User,
+    now,
+)
 from pipeline.review.errors import Invalid, NotFound, Stale
 from pipeline.review.fields import FieldError, agreement, resolve
 
@@ -77,6 +90,27 @@ def _reviewed_by(user_id: int):
     return exists().where(and_(Review.item_id == Item.id, Review.reviewer_id == user_id))
 
 
+READ_REVIEWS = "reviews_read"  # audit event: this user has seen the reviews of this episode
+
+
+def _read_reviews_of(user: User):
+    """True for items whose episode's reviews `user` has read (adjudication view, history)."""
+    return exists().where(and_(Event.kind == READ_REVIEWS, Event.actor == user.name, Event.item_key == Item.key))
+
+
+def note_reviews_read(s: Session, user: User, item: Item) -> None:
+    """Record, once per episode, that `user` has read its reviews: they may no longer review it."""
+    seen = s.scalar(select(Event.id).where(Event.kind == READ_REVIEWS, Event.actor == user.name,
+                                           Event.item_key == item.key).limit(1))
+    if seen is None:
+        audit.record(s, user.name, READ_REVIEWS, item)
+
+
+def _refuse_if_read(s: Session, user: User, item: Item) -> None:
+    if s.scalar(select(Item.id).where(Item.id == item.id, _read_reviews_of(user))):
+        raise Stale(f"you have read the reviews of item {item.id}'s episode; it needs reviewers who have not")
+
+
 def lease_item(s: Session, user: User, item: Item, cfg: QueueSettings) -> Lease:
     """Hold `item` for `user` for the lease time (renewing a lease they hold)."""
     t = now()
@@ -84,6 +118,7 @@ def lease_item(s: Session, user: User, item: Item, cfg: QueueSettings) -> Lease:
         raise Stale(f"item {item.id} is {item.status}, not open for review", current={"status": item.status})
     if s.scalar(select(Review.id).where(Review.item_id == item.id, Review.reviewer_id == user.id)):
         raise Stale(f"you already reviewed item {item.id}")
+    _refuse_if_read(s, user, item)
     lease = s.scalar(select(Lease).where(Lease.item_id == item.id, Lease.user_id == user.id))
     if lease is None:
         if item.n_reviews + _active_leases(s, item.id, t, exclude_user=user.id) >= item.required_reviews:
@@ -112,7 +147,8 @@ def lease_next(s: Session, user: User, cfg: QueueSettings) -> Item | None:
         _last_sweep[bind] = t
     held = s.scalar(
         select(Item).join(Lease, Lease.item_id == Item.id)
-        .where(Lease.user_id == user.id, Lease.expires_at > t, Item.status.in_(COLLECTING), ~_reviewed_by(user.id))
+        .where(Lease.user_id == user.id, Lease.expires_at > t, Item.status.in_(COLLECTING), ~_reviewed_by(user.id),
+               ~_read_reviews_of(user))
         .order_by(Item.id).limit(1)
     )
     if held is not None:
@@ -121,7 +157,8 @@ def lease_next(s: Session, user: User, cfg: QueueSettings) -> Item | None:
     leases = select(func.count(Lease.id)).where(Lease.item_id == Item.id, Lease.expires_at > t).scalar_subquery()
     item = s.scalar(
         select(Item)
-        .where(Item.status.in_(COLLECTING), Item.n_reviews + leases < Item.required_reviews, ~_reviewed_by(user.id))
+        .where(Item.status.in_(COLLECTING), Item.n_reviews + leases < Item.required_reviews, ~_reviewed_by(user.id),
+               ~_read_reviews_of(user))
         .order_by(Item.quarantined, Item.n_reviews.desc(), Item.id).limit(1)
     )
     if item is not None:
@@ -173,6 +210,7 @@ def submit_review(s: Session, user: User, item_id: int, body: dict, cfg: QueueSe
     edited = sorted((body.get("fields") or {}).keys()) if decision == "revise" else []
     before = _review_dict(mine) if mine is not None else None
     if mine is None:
+        _refuse_if_read(s, user, item)
         t = now()
         held = s.scalar(select(Lease.id).where(Lease.item_id == item.id, Lease.user_id == user.id, Lease.expires_at > t))
         if held is None and item.n_reviews + _active_leases(s, item.id, t, exclude_user=user.id) >= item.required_reviews:
