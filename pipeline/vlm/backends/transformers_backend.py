@@ -11,7 +11,14 @@ processor with `VideoMetadata(total_num_frames, fps=<true fps>, frames_indices=[
 `do_sample_frames=False`: without metadata the Qwen3 processors stamp `<t seconds>` at 24 fps
 (every time shrinks by 20/24 on a 20 Hz render) and Qwen2.5-VL's time ids drift the same
 way. `extra["prompt_time_marks"]` records the stamps the model actually saw and
-`extra["second_per_grid_ts"]` Qwen2.5-VL's time step, so this stays checkable.
+`extra["second_per_grid_ts"]` Qwen2.5-VL's time step, so this stays checkable: the time the
+model is told for each temporal group of 2 sent frames is their true time in the video
+(Qwen3-VL / Qwen3.5: the mean of the two, as the processor stamps it; Qwen2.5-VL: the first,
+at group index x second_per_grid_ts). See `frame_metadata` for the one subtlety.
+
+Loading: the checkpoint goes straight to `device` (`device_map`): transformers 5 builds the
+model on the meta device and loads each shard where it belongs, so a 52 GB checkpoint is
+never materialized in CPU memory before a GPU copy.
 
 Generation is greedy. `logits_processors` (constructor) are passed to `generate` on every
 request (constrained decoding; tests use it to force known answers through the real path).
@@ -32,6 +39,35 @@ from pipeline.vlm.video_input import sample_video
 
 THINK_END = "</think>"
 _TIME_MARK = re.compile(r"<\d+(?:\.\d+)? seconds>")
+
+
+def load_kwargs(dtype, device: str) -> dict:
+    """`from_pretrained` arguments that place every weight on `device` as it is read."""
+    return {"dtype": dtype, "device_map": device}
+
+
+def frame_metadata(video, width: int, height: int):
+    """The `VideoMetadata` under which every Qwen family tells each sent frame its true time.
+
+    Qwen3-VL / Qwen3.5 stamp frames_indices / fps. Qwen2.5-VL instead derives its time step
+    from `len(frames_indices) / total_num_frames * fps`, which is the sampling rate only when
+    the frame count is a multiple of the stride: every 2nd frame of a 49-frame 4 fps video
+    gives 25 / 49 * 4 = 2.04 fps, a 0.98 s step instead of 1.0 (2% drift). So
+    `total_num_frames` is the span the sent frames stand for (count x stride); the true
+    count and duration stay in `extra["video"]`.
+    """
+    from transformers.video_utils import VideoMetadata
+
+    indices = list(video.frames_indices)
+    return VideoMetadata(
+        total_num_frames=len(indices) * video.stride,
+        fps=video.source_fps,
+        frames_indices=indices,
+        duration=video.duration_s,
+        width=width,
+        height=height,
+        video_backend="pyav",
+    )
 
 
 class TransformersBackend(BackendBase):
@@ -62,7 +98,7 @@ class TransformersBackend(BackendBase):
         self._torch = torch
         self.processor = AutoProcessor.from_pretrained(cfg.model_path)
         dtype = "auto" if cfg.dtype == "auto" else getattr(torch, cfg.dtype)
-        self.model = AutoModelForImageTextToText.from_pretrained(cfg.model_path, dtype=dtype).to(cfg.device).eval()
+        self.model = AutoModelForImageTextToText.from_pretrained(cfg.model_path, **load_kwargs(dtype, cfg.device)).eval()
         self.model_name = Path(cfg.model_path).name
         self.logits_processors = list(logits_processors or [])
         tok = self.processor.tokenizer
@@ -83,7 +119,6 @@ class TransformersBackend(BackendBase):
 
     def _one(self, req: VLMRequest) -> VLMResult:
         from transformers import LogitsProcessorList
-        from transformers.video_utils import VideoMetadata
 
         prompt = self.prompts[req.task]
         base = dict(
@@ -100,15 +135,7 @@ class TransformersBackend(BackendBase):
         except EpisodeError as e:
             return VLMResult(**base, error=f"{e.reason}: {e.detail}")
         n, h, w = video.frames.shape[:3]
-        metadata = VideoMetadata(
-            total_num_frames=video.total_frames,
-            fps=video.source_fps,
-            frames_indices=list(video.frames_indices),
-            duration=video.duration_s,
-            width=w,
-            height=h,
-            video_backend="pyav",
-        )
+        metadata = frame_metadata(video, w, h)
         chat = self._chat(prompt_text(prompt, req.instruction, video.duration_s, req.fail_time_s))
         inputs = self.processor(
             text=[chat], videos=[video.frames], video_metadata=[metadata], do_sample_frames=False, return_tensors="pt"
