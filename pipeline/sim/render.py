@@ -13,10 +13,28 @@ videos people and VLMs watch, never for policy inputs.
 
 from __future__ import annotations
 
+import atexit
+import weakref
+
 import numpy as np
 
 CAMERAS = ("agentview", "robot0_eye_in_hand")
 QUALITIES = ("standard", "fast")
+
+# Every open renderer of this process, closed at exit. MuJoCo registers `eglTerminate` with
+# atexit when it makes its first EGL context; a renderer still open after that (a worker's
+# cached environment) is freed during interpreter teardown against a terminated display and
+# prints `Exception ignored in ... GLContext.__del__` tracebacks into the stage's output.
+# atexit runs last-registered first, so our hook, registered right after that first context,
+# closes every renderer while the display is still alive.
+_OPEN: weakref.WeakSet[FrameRenderer] = weakref.WeakSet()
+_hook_registered = False
+
+
+def close_all() -> None:
+    """Close every renderer of this process (idempotent; runs at interpreter exit)."""
+    for r in list(_OPEN):
+        r.close()
 
 
 class FrameRenderer:
@@ -37,6 +55,11 @@ class FrameRenderer:
             self._renderer = mujoco.Renderer(model, height=size, width=size)
         finally:
             model.vis.quality.offsamples = samples
+        global _hook_registered
+        _OPEN.add(self)
+        if not _hook_registered:  # after MuJoCo's own atexit hook, so that ours runs first
+            atexit.register(close_all)
+            _hook_registered = True
 
     def render(self, data, camera: str) -> np.ndarray:
         """HxWx3 uint8 image of `camera` for the current `data` (call mj_forward first)."""
@@ -47,9 +70,10 @@ class FrameRenderer:
 
     def close(self) -> None:
         # closing explicitly avoids EGL tracebacks at interpreter exit
-        if self._renderer is not None:
+        if getattr(self, "_renderer", None) is not None:
             self._renderer.close()
             self._renderer = None
+        _OPEN.discard(self)
 
     def __del__(self):  # pragma: no cover - best effort
         try:
