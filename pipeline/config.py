@@ -3,8 +3,9 @@
 Every section forbids unknown keys, so a typo fails before any work with the file, the
 dotted key and the reason. Scalars are strict where YAML's coercions would hide a mistake
 (`horizon: true` is not 1, `stop_on_success: 1` is not true); an empty file is an error,
-not the full default run; repeated suites, task names or init states are refused. The resolved config is saved beside each stage's outputs
-(`save_resolved`), so a run can always be traced back to what produced it.
+not the full default run; repeated suites, task names or init states are refused. The
+resolved config is saved beside each stage's outputs (`save_resolved`), so a run can always
+be traced back to what produced it.
 """
 
 from __future__ import annotations

@@ -6,7 +6,7 @@ BDDL; objects of one type share one declaration line; the npy loads and has the 
 state length; the scene restores exactly; the goal does not hold; no object moves more than
 `settle_threshold_m` in `settle_check_steps` zero-action steps. Also: no scene file on disk
 is missing from the manifest, and nothing sits at the top level that a release does not
-write (`TOP_LEVEL`). Scenes are grouped by task (and BDDL model signature), so each
+write (`TOP_LEVEL_FILES`, `TOP_LEVEL_DIRS`). Scenes are grouped by task (and BDDL model signature), so each
 environment is built once. Output: a per-scene table and every problem, each naming its file;
 `main` returns 1 if there is any problem, else 0.
 """

@@ -8,10 +8,10 @@ Outputs: a FastAPI app. Routes (all JSON unless noted):
   GET  /api/items/{id}/evidence, /frames                GET  /api/items/{id}/history
   GET  /api/items/{id}/adjudication   POST .../claim    POST .../adjudication
   GET  /api/status           GET /media/<path under the run folder> (file)   GET / (the page)
-Invariants: every route but login and the page needs a user (the OpenAPI docs too, and
-only with `docs=True`); an item's reviews (adjudication, history) stay hidden while they
-are being collected, and whoever has read them can no longer review that episode; writes through the cookie
-need the CSRF header; errors are `{"detail", "field"?, "current"?}` with 401/403/404/409/422;
+Invariants: every route but login and the page needs a user (the OpenAPI docs too, served
+only with `docs=True`); an item's reviews (adjudication, history) stay hidden while they are
+being collected, and whoever has read them can no longer review that episode; writes
+through the cookie need the CSRF header; errors are `{"detail", "field"?, "current"?}` with 401/403/404/409/422;
 a request body that fails the schema is a 422 whose `field` names the bad field.
 """
 
@@ -199,7 +199,7 @@ def create_app(run_dir: str | Path, engine: Engine, settings: QueueSettings, ui_
     def _reviews_visible(s, p: auth.Principal, item_id: int, whole_episode: bool = False):
         # blindness: nobody reads an item's reviews while they are being collected, nobody
         # reads the others' decisions on an item they reviewed, and whoever reads them is
-        # recorded so that they can no longer review that episode (workflow.read_reviews)
+        # recorded so that they can no longer review that episode (workflow.note_reviews_read)
         item = workflow.get_item(s, item_id)
         keys = [item.key] if whole_episode else []
         if item.status in COLLECTING or (keys and s.scalar(select(Item.id).where(Item.key.in_(keys),

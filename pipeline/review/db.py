@@ -15,7 +15,6 @@ lock upgrade. Times are UNIX seconds (float).
 from __future__ import annotations
 
 import os
-
 import threading
 import time
 from collections.abc import Iterator
