@@ -176,7 +176,8 @@ def _(tmp):
         got = dan.post(f"/api/items/{items[0]}/review", json={"decision": "accept", "version": 0,
                                                              "idempotency_key": "d"})
     engine.dispose()
-    return f"adjudication/history of the open item: {codes[0]}/{codes[1]}; dan's own review: {got.status_code} (allowed, he read nothing)"
+    return (f"adjudication/history of the open item: {codes[0]}/{codes[1]}; "
+            f"dan's own review: {got.status_code} (allowed, he read nothing)")
 
 
 @case("review: database files, API docs, deactivated reviewer")
@@ -294,8 +295,8 @@ def main() -> int:
             except Exception as e:  # one line per case, whatever happened
                 failed += 1
                 where = traceback.extract_tb(e.__traceback__)[-1]
-                print(f"NOT HANDLED: {name}: {type(e).__name__}: {str(e)[:200]} ({Path(where.filename).name}:{where.lineno})",
-                      flush=True)
+                at = f"{Path(where.filename).name}:{where.lineno}"
+                print(f"NOT HANDLED: {name}: {type(e).__name__}: {str(e)[:200]} ({at})", flush=True)
     return failed
 
 

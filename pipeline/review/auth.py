@@ -76,7 +76,8 @@ def add_user(engine: Engine, name: str, role: str, actor: str = "admin") -> str:
 def list_users(engine: Engine) -> list[dict]:
     """Every person: name, role and whether they may sign in (no token material)."""
     with read_session(engine) as s:
-        return [{"name": u.name, "role": u.role, "active": u.active} for u in s.scalars(select(User).order_by(User.name))]
+        users = s.scalars(select(User).order_by(User.name))
+        return [{"name": u.name, "role": u.role, "active": u.active} for u in users]
 
 
 def set_active(engine: Engine, name: str, active: bool, actor: str = "admin") -> bool:

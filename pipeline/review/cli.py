@@ -32,7 +32,7 @@ def _cfg(path: Path):
 @app.command()
 def serve(config: Path = CONFIG, host: str = typer.Option(None, help="default: stage3.host"),
           port: int = typer.Option(None, help="default: stage3.port"),
-          docs: bool = typer.Option(False, "--docs", help="serve /api/docs and /api/openapi.json (signed-in users only)"),
+          docs: bool = typer.Option(False, "--docs", help="serve /api/docs and /api/openapi.json (signed in)"),
           ) -> None:
     """Serve the review web page and API."""
     import uvicorn

@@ -128,7 +128,8 @@ def test_a_key_repeated_with_the_same_value_is_harmless():
 
 
 def test_a_repeated_key_in_a_characterization_is_ambiguous():
-    raw = '{"recovery_level": "L1", "recovery_level": "L3", "failure_category": "grasp_failure", "recovery_action": "x"}'
+    raw = ('{"recovery_level": "L1", "recovery_level": "L3", '
+           '"failure_category": "grasp_failure", "recovery_action": "x"}')
     out = parse_characterization(raw)
     assert isinstance(out, Quarantine) and out.reason is QuarantineReason.ambiguous
 

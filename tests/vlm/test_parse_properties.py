@@ -45,7 +45,8 @@ def _mutated_answer(draw) -> str:
         if op == "cut":
             text = text[:i]
         elif op == "insert":
-            text = text[:i] + draw(st.sampled_from(["{", "}", "[", '"', ",", ":", "0" * 50, "9" * 5000, "，", "“", "NaN"])) + text[i:]
+            piece = draw(st.sampled_from(["{", "}", "[", '"', ",", ":", "0" * 50, "9" * 5000, "，", "“", "NaN"]))
+            text = text[:i] + piece + text[i:]
         elif op == "delete":
             text = text[:i] + text[i + 1 :]
         elif op == "nest":

@@ -98,7 +98,8 @@ class TransformersBackend(BackendBase):
         self._torch = torch
         self.processor = AutoProcessor.from_pretrained(cfg.model_path)
         dtype = "auto" if cfg.dtype == "auto" else getattr(torch, cfg.dtype)
-        self.model = AutoModelForImageTextToText.from_pretrained(cfg.model_path, **load_kwargs(dtype, cfg.device)).eval()
+        model = AutoModelForImageTextToText.from_pretrained(cfg.model_path, **load_kwargs(dtype, cfg.device))
+        self.model = model.eval()
         self.model_name = Path(cfg.model_path).name
         self.logits_processors = list(logits_processors or [])
         tok = self.processor.tokenizer
