@@ -3,7 +3,8 @@
 Inputs: the run folder, a database engine, the queue settings.
 Outputs: a FastAPI app. Routes (all JSON unless noted):
   POST /api/login {token} -> session cookie + csrf      POST /api/logout     GET /api/me
-  GET  /api/queue            POST /api/queue/next       POST /api/items/{id}/lease
+  GET  /api/queue (with `progress`)   GET /api/progress (done today, left, agreement so far)
+  POST /api/queue/next       POST /api/items/{id}/lease
   GET  /api/items/{id}       POST /api/items/{id}/review (accept | revise | flag)
   GET  /api/items/{id}/evidence, /frames                GET  /api/items/{id}/history
   GET  /api/items/{id}/adjudication   POST .../claim    POST .../adjudication
@@ -24,7 +25,8 @@ from fastapi import Depends, FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, JSONResponse, Response
 from fastapi.staticfiles import StaticFiles
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from starlette.concurrency import run_in_threadpool
 from sqlalchemy import select
 from sqlalchemy.engine import Engine
 
@@ -73,12 +75,27 @@ def _edits(f: FieldsIn | None) -> dict:
     return {} if f is None else f.model_dump(mode="json", exclude_unset=True)
 
 
+SECRET_FIELDS = {"token", "csrf", "password"}
+
+
+def _echo(field: str, value) -> str:
+    """What of a rejected input an error may repeat: numbers and short words of non-secret
+    fields; never a whole body (it may hold a token) nor a secret field."""
+    if field in SECRET_FIELDS or field == "body":
+        return ""
+    if isinstance(value, (bool, int, float)) or value is None:
+        return f" (got {value!r})"
+    if isinstance(value, str) and len(value) <= 40:
+        return f" (got {value!r})"
+    return ""
+
+
 def _validation_error(_req: Request, exc: RequestValidationError) -> JSONResponse:
     errors = []
     for e in exc.errors():
         loc = [str(p) for p in e["loc"] if p not in ("body",)]
         field = next((p for p in reversed(loc) if not p.isdigit()), "body")
-        got = f" (got {e['input']!r})" if "input" in e and not isinstance(e["input"], dict) else ""
+        got = _echo(field, e["input"]) if "input" in e else ""
         errors.append({"field": field, "path": ".".join(loc), "msg": f"{field}: {e['msg']}{got}"})
     first = errors[0] if errors else {"field": "body", "msg": "invalid request"}
     return JSONResponse(status_code=422, content={"detail": first["msg"], "field": first["field"], "errors": errors})
@@ -123,11 +140,21 @@ def create_app(run_dir: str | Path, engine: Engine, settings: QueueSettings, ui_
             return get_swagger_ui_html(openapi_url="/api/openapi.json", title=app.title)
 
     @app.post("/api/login")
-    def login(body: LoginIn, request: Request):
-        # JSON only: a cross-site form cannot send it without a CORS preflight (login CSRF)
-        if not request.headers.get("content-type", "").startswith("application/json"):
-            return JSONResponse(status_code=415, content={"detail": "send JSON"})
-        user, sid, csrf = auth.sign_in(engine, body.token)
+    async def login(request: Request):
+        # JSON only: a cross-site form cannot send it without a CORS preflight (login CSRF).
+        # The type is checked before the body is parsed, and no answer repeats the body: it
+        # holds a personal token
+        if request.headers.get("content-type", "").split(";")[0].strip().lower() != "application/json":
+            return JSONResponse(status_code=415, content={"detail": "send JSON: Content-Type: application/json",
+                                                          "field": "content-type"})
+        try:
+            body = LoginIn.model_validate_json(await request.body())
+        except ValidationError as e:
+            field = next((str(p) for err in e.errors() for p in reversed(err["loc"])), "body")
+            return JSONResponse(status_code=422, content={"detail": f"{field}: expected a JSON object "
+                                                                    '{"token": "<your personal token>"}',
+                                                          "field": field})
+        user, sid, csrf = await run_in_threadpool(auth.sign_in, engine, body.token)
         resp = JSONResponse({"user": user.name, "role": user.role, "csrf": csrf})
         resp.set_cookie(auth.COOKIE, sid, max_age=auth.SESSION_SECONDS, httponly=True, samesite="strict",
                         secure=request.url.scheme == "https", path="/")
@@ -150,7 +177,14 @@ def create_app(run_dir: str | Path, engine: Engine, settings: QueueSettings, ui_
     @app.get("/api/queue")
     def queue(p: auth.Principal = Depends(who)):
         with read_session(engine) as s:
-            return JSONResponse(views.queue(s, p.user, auth.rank(p.user.role) >= auth.rank("adjudicator")))
+            out = views.queue(s, p.user, auth.rank(p.user.role) >= auth.rank("adjudicator"))
+            out["progress"] = views.progress(s, p.user, settings.time_tolerance_s, settings.control_hz)
+            return JSONResponse(out)
+
+    @app.get("/api/progress")
+    def progress(p: auth.Principal = Depends(who)):
+        with read_session(engine) as s:
+            return JSONResponse(views.progress(s, p.user, settings.time_tolerance_s, settings.control_hz))
 
     @app.post("/api/queue/next")
     def next_item(p: auth.Principal = Depends(who)):
