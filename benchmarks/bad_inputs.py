@@ -198,6 +198,31 @@ def _(tmp):
     return f"files {modes}; docs {docs[0]}/{docs[1]} without sign-in; deactivated token -> {refused}"
 
 
+@case("review: a revision that changes nothing (fail_time_s: \"5\" when it is 5)")
+def _(tmp):
+    import httpx
+    from sqlalchemy import select
+
+    from pipeline.review.db import Event, Review, read_session
+
+    server, items, tokens, engine, _ = _review_server(tmp)
+    with server:
+        ann = httpx.Client(base_url=server.url, headers={"Authorization": f"Bearer {tokens['ann']}"})
+        model_t = ann.get(f"/api/items/{items[0]}").json()["proposal"]["fail_time_s"]
+        first = ann.post(f"/api/items/{items[0]}/review", json={
+            "decision": "revise", "version": 0, "idempotency_key": "a", "fields": {"fail_time_s": str(model_t)}}).json()
+        again = ann.post(f"/api/items/{items[0]}/review", json={
+            "decision": "revise", "version": 1, "idempotency_key": "b", "fields": {"fail_time_s": str(model_t)}}).json()
+    with read_session(engine) as s:
+        r = s.scalar(select(Review).where(Review.item_id == items[0]))
+        changed = s.scalars(select(Event.id).where(Event.item_id == items[0], Event.kind == "review_changed")).all()
+    engine.dispose()
+    assert (r.decision, r.edited, r.version, again["replayed"], changed) == ("accept", [], 1, True, []), \
+        (r.decision, r.edited, r.version, again, changed)
+    return (f"the model's time {str(model_t)!r} stored as {first['decision']} (no edit); sent again: replayed, "
+            f"version stays {r.version}, no audit event")
+
+
 # -- verify ---------------------------------------------------------------------------------
 
 
@@ -274,7 +299,6 @@ slot("stage 2: truncated states.npy / steps.parquet, bad manifest cell", "stage 
 slot("stage 3: NaN or negative fail_time_s, repeated key, stale done marker", "stage runner")
 slot("local executor: kill -9 of one stage-1 worker", "executors")
 slot("Ray executor: a worker node removed mid-run", "executors")
-slot("review: a revision that changes nothing", "issue 13")
 
 
 def main() -> int:
