@@ -154,7 +154,10 @@ class PolicyConfig(_Strict):
 
 
 class VideoConfig(_Strict):
-    cameras: list[Literal["agentview", "robot0_eye_in_hand"]] = Field(default_factory=lambda: ["agentview"])
+    # the review page shows both views side by side; 256 px is the smallest size at which
+    # reviewers can tell the scene's objects apart
+    cameras: list[Literal["agentview", "robot0_eye_in_hand"]] = Field(
+        default_factory=lambda: ["agentview", "robot0_eye_in_hand"])
     fps: int = Field(default=4)
     resolution: int = Field(default=256, ge=32, le=1024)
     # render which episodes: failures only (all later stages need) or all of them
