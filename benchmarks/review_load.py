@@ -1,13 +1,18 @@
 """Load on the review server: p95 latency of the item page and of the decision POST with
-20 concurrent reviewers on loopback (aim <= 100 ms), and the count of lost decisions (must be 0).
+20 concurrent reviewers on loopback (aim: decision p95 <= 100 ms), lost decisions and items
+over K (both must be 0). Exits 1 when any aim is missed (`missed`).
 
-Runs the real server (`recover review serve`, its own process, SQLite in WAL mode) on a
+Runs the real server (`recover review serve --workers 2`, its own processes, SQLite in WAL mode) on a
 synthetic run folder (`pipeline.review.sample_run`), then reviewer threads that each loop
   POST /api/queue/next -> item page (GET item, frames, evidence) -> POST decision
-until the queue is empty. One reviewer first, then N at once, printed side by side.
+until the queue is empty. One reviewer first, then N at once, printed side by side. The
+reviewers are threads spread over 4 client processes (20 people use 20 browsers). The
+server's CPU time per item (5 requests) is printed too: unlike latencies, other work on
+the machine barely changes it.
 A decision is lost when the server acknowledged it (200) but the database lacks it.
 
     .venv/bin/python benchmarks/review_load.py [--reviewers 20] [--items 300] [--k 2] [--think-s 0]
+        [--workers 2] [--clients 4] [--aim-ms 100]
 Results: printed, and written to benchmarks/results/review_load.json.
 """
 
@@ -160,12 +165,29 @@ def check(engine, acked: list[tuple[int, str, dict]], k: int) -> dict:
     return {"lost_decisions": lost, "stored": len(stored), "items_over_k": over}
 
 
+def missed(one: dict, many: dict, aim_ms: float) -> list[str]:
+    """The aims this run missed (the exit status is 1 when there is any): decision p95 of the
+    N-reviewer run within the aim, no decision lost, no item over K, none refused."""
+    out = []
+    if not many["decision_p95_ms"] <= aim_ms:  # NaN (no decisions at all) misses too
+        out.append(f"decision p95 {many['decision_p95_ms']} ms > {aim_ms:g} ms")
+    for name, res in (("1 reviewer", one), (f"{many['reviewers']} reviewers", many)):
+        if res["lost_decisions"]:
+            out.append(f"{res['lost_decisions']} decision(s) lost ({name})")
+        if res["items_over_k"]:
+            out.append(f"{res['items_over_k']} item(s) over K ({name})")
+        if res["refused"]:
+            out.append(f"{res['refused']} decision(s) refused ({name}): {res['errors'][:1]}")
+    return out
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--reviewers", type=int, default=20)
     ap.add_argument("--items", type=int, default=300, help="items for the N-reviewer run")
     ap.add_argument("--k", type=int, default=2)
     ap.add_argument("--workers", type=int, default=2, help="server processes (`recover review serve --workers`)")
+    ap.add_argument("--aim-ms", type=float, default=100.0, help="decision p95 aim of the N-reviewer run")
     ap.add_argument("--clients", type=int, default=4, help="client processes the reviewers are spread over")
     ap.add_argument("--think-s", type=float, default=0.0,
                     help="pause between loading an item and deciding (0 = a stress test: nobody watches)")
@@ -213,15 +235,17 @@ def main() -> int:
         a, b = one[c], many[c]
         ratio = f"{b / a:.2f}x" if isinstance(a, (int, float)) and a else ""
         print(f"{c:<20}{a:>14}{b:>16}{ratio:>9}")
-    verdict = "OK" if many["item_page_p95_ms"] <= 100 and many["decision_p95_ms"] <= 100 else "ABOVE the 100 ms aim"
-    print(f"think time {args.think_s} s per item; p95 with {args.reviewers} reviewers: item page {many['item_page_p95_ms']} ms, decision "
-          f"{many['decision_p95_ms']} ms -> {verdict}; lost decisions: {many['lost_decisions'] + one['lost_decisions']}")
+    misses = missed(one, many, args.aim_ms)
+    verdict = "OK" if not misses else "MISSED: " + "; ".join(misses)
+    print(f"think time {args.think_s} s per item; p95 with {args.reviewers} reviewers: item page "
+          f"{many['item_page_p95_ms']} ms, decision {many['decision_p95_ms']} ms (aim <= {args.aim_ms:g} ms); "
+          f"lost decisions: {many['lost_decisions'] + one['lost_decisions']} -> {verdict}")
     out = REPO / "benchmarks" / "results" / f"review_load{f'_think{args.think_s:g}s' if args.think_s else ''}.json"
     out.parent.mkdir(parents=True, exist_ok=True)
     load_avg = [round(x, 2) for x in os.getloadavg()]
     print(f"machine: {os.cpu_count()} cores, load average {load_avg} (other work on the machine slows every request)")
     out.write_text(json.dumps({"one": one, "many": many, "cpu_count": os.cpu_count(), "load_avg": load_avg}, indent=2))
-    return 0 if many["lost_decisions"] == 0 and one["lost_decisions"] == 0 and many["items_over_k"] == 0 else 1
+    return 1 if misses else 0
 
 
 if __name__ == "__main__":
