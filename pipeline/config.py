@@ -263,7 +263,7 @@ class Stage3Config(_Strict):
     host: str = "127.0.0.1"  # `recover review serve` (loopback unless you mean otherwise)
     port: int = Field(default=8765, ge=1, le=65535)
     # server processes; SQLite writes from all of them queue on one lock file (review/db.py)
-    workers: int = Field(default=1, ge=1, le=64)
+    workers: int = Field(default=2, ge=1, le=64)
 
 
 class ReleaseConfig(_Strict):
