@@ -32,7 +32,8 @@ def test_resolve_overlays_edits_and_derives_the_step():
 @pytest.mark.parametrize("given, stored, step", [(2.26, 2.25, 45), (2.275, 2.3, 46), (2.9500000000000002, 2.95, 59),
                                                  (3.0749, 3.05, 61), (0.0, 0.0, 0), (9.98, 9.95, 199)])
 def test_failure_times_are_snapped_to_the_control_grid(given, stored, step):
-    out = resolve(PROPOSAL, {"fail_time_s": given}, duration_s=9.98, control_hz=20)  # 9.98 s snaps past the end: the last step
+    # 9.98 s would snap past the end of a 9.98 s episode: the last step inside it
+    out = resolve(PROPOSAL, {"fail_time_s": given}, duration_s=9.98, control_hz=20)
     assert (out["fail_time_s"], out["fail_step"]) == (stored, step)
 
 

@@ -99,7 +99,8 @@ def test_review_videos_of_both_cameras_at_256_px_leave_the_states_byte_identical
     # the next episode's depend on what (or whether) was rendered
     got = []
     for name, video in (("none", {"render": "none"}),
-                        ("both256", {"cameras": ["agentview", "robot0_eye_in_hand"], "resolution": 256, "render": "all"}),
+                        ("both256", {"cameras": ["agentview", "robot0_eye_in_hand"], "resolution": 256,
+                                     "render": "all"}),
                         ("after", {"render": "none"})):
         cfg = _cfg(tmp_path / name, video={"fps": 5, **video})
         (unit,) = plan_units(cfg)
