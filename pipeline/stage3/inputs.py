@@ -8,8 +8,8 @@ Inputs (run folder):
 Outputs: `Unit`s, one per episode key: a localization, or the quarantine entry of an episode
 with no localization. A localization stage 3 cannot use as it is becomes a quarantined unit
 itself (a stage-3 QuarantineEntry naming the file, the field and the reason, one of
-`INPUT_FAULTS`): a file that does not parse, a fail_time_s that is NaN, negative or past the
-episode's end, a key another file claims too. Nothing is silently dropped.
+`INPUT_FAULTS`): a file that does not parse, a key that is not its suite/task/episode_id, a
+fail_time_s that is NaN, negative or past the episode's end, a key another file claims too. Nothing is silently dropped.
 Paths in the context are relative to the run folder (the server serves nothing else).
 """
 
@@ -27,7 +27,7 @@ from pipeline.sim.render import CAMERAS
 
 
 # reasons of the units `collect` sets aside itself: a stage-2 file it cannot use as it is
-INPUT_FAULTS = ("unreadable", "duplicate_key", "fail_time_not_finite", "fail_time_negative",
+INPUT_FAULTS = ("unreadable", "key_mismatch", "duplicate_key", "fail_time_not_finite", "fail_time_negative",
                 "fail_time_beyond_episode")
 
 
@@ -72,8 +72,9 @@ def _problem(path: Path, e: Exception) -> tuple[str, str | None]:
 
 
 def _key_from_path(root: Path, path: Path) -> str:
-    rel = path.relative_to(root).with_suffix("")
-    return "/".join(rel.parts[-3:]) if len(rel.parts) >= 3 else rel.as_posix()
+    """suite/task/episode_id from a file's place (padded, so every key has three parts)."""
+    parts = path.relative_to(root).with_suffix("").parts[-3:]
+    return "/".join(("unknown_suite", "unknown_task")[: 3 - len(parts)] + parts)
 
 
 def _rel(run_dir: Path, path: Path) -> str:
@@ -81,7 +82,9 @@ def _rel(run_dir: Path, path: Path) -> str:
 
 
 def _lengths(run_dir: Path) -> dict[str, float]:
-    """Episode length in seconds by key, from the stage-1 manifest (rows that read)."""
+    """Latest valid onset time by key, from the stage-1 manifest (rows that read): the last
+    state's time plus one video frame, since a VLM sees a video of total_frames / fps seconds
+    (pipeline.vlm.video_input) and may answer up to its end."""
     manifest = run_dir / "stage1" / "episodes.parquet"
     if not manifest.is_file():
         return {}
@@ -91,7 +94,7 @@ def _lengths(run_dir: Path) -> dict[str, float]:
         records, _ = read_episode_rows(manifest)
     except Exception:  # stage 2 reports an unreadable manifest; here it only bounds times
         return {}
-    return {r.key: r.steps / r.control_hz for r in records}
+    return {r.key: r.steps / r.control_hz + (1 / r.video_fps if r.video_fps else 0.0) for r in records}
 
 
 def _time_fault(loc: Localization, length: float | None) -> tuple[str, str] | None:
@@ -130,6 +133,10 @@ def collect(run_dir: Path) -> list[Unit]:
         except (ValidationError, ValueError, OSError) as e:
             set_aside(path, "unreadable", *_problem(path, e))
             continue
+        if loc.key != f"{loc.suite}/{loc.task}/{loc.episode_id}":  # every later step splits the key
+            set_aside(path, "key_mismatch", f"{path}: field key: {loc.key!r} is not "
+                      f"suite/task/episode_id ({loc.suite}/{loc.task}/{loc.episode_id})", "key", loc)
+            continue
         claims.setdefault(loc.key, []).append((path, loc))
     lengths = _lengths(run_dir)
     for key, claimants in claims.items():
@@ -152,17 +159,28 @@ def collect(run_dir: Path) -> list[Unit]:
             detail, field = _problem(path, e)
             q = QuarantineEntry(key=key, stage="stage3", source="stage2", reason="unreadable", detail=detail,
                                 file=_rel(run_dir, path), field=field)
+        if len(q.key.split("/")) != 3:
+            q = q.model_copy(update={"key": _key_from_path(q_root, path)})
         if q.key not in units:
             units[q.key] = Unit(q.key, quarantine=q, source=path)
     return [units[k] for k in sorted(units)]
 
 
 def _duration_of(run_dir: Path, key: str) -> float | None:
-    """An episode's length from its frame table or evidence, when the manifest has no row."""
+    """The latest valid onset time from the frame table (last frame + one frame) or the
+    evidence (last step), when the manifest has no row; None when neither reads."""
+    import pyarrow.parquet as pq
+
     suite, task, ep = key.split("/", 2)
-    frames = Path("stage1") / "episodes" / suite / task / ep / "frames.parquet"
+    frames = run_dir / "stage1" / "episodes" / suite / task / ep / "frames.parquet"
+    try:
+        times = sorted(pq.read_table(frames, columns=["time_s"]).column("time_s").to_pylist())
+        if times:
+            return times[-1] + (times[-1] - times[-2] if len(times) > 1 else 0.0)
+    except Exception:  # missing or unreadable: try the evidence
+        pass
     ev = Path("stage2") / "evidence" / suite / task / f"{ep}.parquet"
-    return _duration(run_dir, *(p.as_posix() if (run_dir / p).is_file() else None for p in (frames, ev)))
+    return _duration(run_dir, None, ev.as_posix() if (run_dir / ev).is_file() else None)
 
 
 def _video_fps(path: Path) -> float | None:
