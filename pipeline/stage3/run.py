@@ -166,7 +166,11 @@ def _instruction(run_dir: Path, unit: Unit) -> str:
         import pyarrow.parquet as pq
 
         suite, task, ep = unit.key.split("/", 2)
-        for row in pq.read_table(manifest, columns=["suite", "task", "episode_id", "instruction"]).to_pylist():
-            if (row["suite"], row["task"], row["episode_id"]) == (suite, task, ep):
+        try:
+            rows = pq.read_table(manifest, columns=["suite", "task", "episode_id", "instruction"]).to_pylist()
+        except Exception:  # an unreadable manifest is stage 2's to report; the key still names the task
+            rows = []
+        for row in rows:
+            if (row["suite"], row["task"], row["episode_id"]) == (suite, task, ep) and row["instruction"]:
                 return row["instruction"]
     return unit.key.split("/")[1].replace("_", " ")
