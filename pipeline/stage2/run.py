@@ -19,7 +19,8 @@ Output layout, under `<run.output_dir>/stage2/`:
     localizations.parquet                              all Localizations, compiled
     agreement.json, agreement.png                      VLM vs simstate (when a VLM ran)
     summary.json
-    _done/<suite>__<task>__<episode_id>.done           completion markers, written last
+    _done/<suite>__<task>__<episode_id>.done           completion markers, written last; they record
+                                                       the inputs' fingerprint (see pending.py)
 
 Flow: (1) with a VLM backend, ask it about every pending episode (vlm_step, main process,
 `max_in_flight` concurrent requests); (2) the executor runs one unit per task (the env is
@@ -35,7 +36,6 @@ manifest as a whole is fatal.
 
 from __future__ import annotations
 
-import json
 from collections import defaultdict
 
 from rich.console import Console
@@ -43,80 +43,14 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from rich.table import Table
 
 from pipeline.config import Config, save_resolved
-from pipeline.errors import FatalError
 from pipeline.executors import make_executor
-from pipeline.atomic import write_json
-from pipeline.records import EpisodeRecord, ManifestProblem, QuarantineEntry, read_episode_rows
-from pipeline.stage2.layout import Stage2Paths, fingerprint, unit_id
+from pipeline.records import EpisodeRecord
+from pipeline.stage2.layout import Stage2Paths
+from pipeline.stage2.pending import pending_failures
 from pipeline.stage2.report import write_reports
 from pipeline.stage2.worker import TaskUnit, process_task
 
 console = Console()
-
-
-def pending_failures(cfg: Config, paths: Stage2Paths) -> tuple[list[EpisodeRecord], int, int]:
-    """(failed episodes not yet done, failed total, successes skipped). A failed episode is
-    done when its marker exists and names the inputs it has now (layout.fingerprint); markers
-    written before fingerprints existed count as done. Manifest rows that make no record are
-    set aside here (`stage1_bad_manifest`), the rest go on."""
-    from pipeline.atomic import Completions
-
-    manifest = cfg.out / "stage1" / "episodes.parquet"
-    if not manifest.exists():
-        raise FatalError(f"{manifest}: no stage 1 manifest; run `recover stage1` first")
-    try:
-        episodes, problems = read_episode_rows(manifest)
-    except Exception as e:  # the whole file unreadable (truncated): nothing to set aside row by row
-        raise FatalError(f"{manifest}: unreadable stage 1 manifest ({type(e).__name__}: {e})") from None
-    _set_aside_manifest_rows(paths, problems)
-    failed = [e for e in episodes if not e.success]
-    done = Completions(paths.root)
-    done_ids = done.done_ids()
-    todo = []
-    for e in failed:
-        if unit_id(e) in done_ids:
-            recorded = (done.info(unit_id(e)) or {}).get("inputs")
-            if recorded is None or recorded == fingerprint(cfg.out / "stage1", e):
-                continue
-            _forget(paths, e)  # its inputs changed since: the stored answers are about old files
-        todo.append(e)
-    n_success = len(episodes) - len(failed) + sum(p.success is True for p in problems)
-    return todo, len(failed) + sum(p.success is not True for p in problems), n_success
-
-
-def _set_aside_manifest_rows(paths: Stage2Paths, problems: list[ManifestProblem]) -> None:
-    """One quarantine entry per bad manifest row (a row whose success cell says True is no
-    failure and is skipped like the other successes); entries of rows fixed since go away."""
-    manifest = "stage1/episodes.parquet"
-    wanted = {}
-    for p in problems:
-        if p.success is True:
-            continue
-        wanted[p.key] = QuarantineEntry(key=p.key, stage="stage2", source="stage2", reason="stage1_bad_manifest",
-                                        detail=f"{manifest} row {p.row}: field {p.field}: {p.detail}",
-                                        file=manifest, field=p.field).model_dump(mode="json")
-    q_root = paths.root / "quarantine"
-    for f in sorted(q_root.rglob("*.json")) if q_root.exists() else []:
-        try:
-            old = json.loads(f.read_text())
-        except (OSError, ValueError):
-            continue
-        if old.get("reason") == "stage1_bad_manifest" and old.get("key") not in wanted:
-            f.unlink(missing_ok=True)
-    for key, entry in wanted.items():
-        target = paths.abs(paths.quarantine_for_key(key))
-        if not target.exists() or json.loads(target.read_text()) != entry:  # a rerun rewrites nothing
-            write_json(target, entry)
-
-
-def _forget(paths: Stage2Paths, rec: EpisodeRecord) -> None:
-    """Drop what an episode's old inputs produced that the redo would not overwrite."""
-    import shutil
-
-    from pipeline.stage2.scenes import scene_dir
-
-    paths.abs(paths.vlm(rec)).unlink(missing_ok=True)  # the VLM is asked again about the new video
-    shutil.rmtree(scene_dir(paths.root, rec.suite, rec.task, rec.episode_id), ignore_errors=True)
 
 
 def task_units(cfg: Config, episodes: list[EpisodeRecord]) -> list[TaskUnit]:
