@@ -3,7 +3,8 @@
 Each case feeds the real component (parser, config loader, review server on loopback with
 SQLite, `recover verify`, a rendering process, torch_compat, the transformers backend on a
 tiny Qwen, `recover stage2` on real rollouts, `recover stage3` on a sample run) the input
-that broke the landed code, and prints `handled: <what it did>`. A case that raises or misbehaves prints `NOT HANDLED: ...`; the exit status is the number of those.
+that broke the landed code, and prints `handled: <what it did>`. A case that raises or
+misbehaves prints `NOT HANDLED: ...`; the exit status is the number of those.
 Cases not built yet print `open: ...` (slots for the executor and no-op revision work).
 
     MUJOCO_GL=egl .venv/bin/python benchmarks/bad_inputs.py [--only SUBSTRING] [--skip-slow]
