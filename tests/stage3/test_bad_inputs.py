@@ -93,3 +93,15 @@ def test_a_corrected_localization_is_read_again_on_the_next_run(bad_run):
     assert not (run / "stage3" / "quarantine" / SUITE / TASK / f"{EP(0)}.json").exists()
     summary = json.loads((run / "stage3" / "summary.json").read_text())
     assert summary["set_aside"] == 3 and summary["skipped"] == 3  # only the two edited files ran again
+
+
+def test_a_key_that_is_not_its_own_suite_task_and_episode_is_set_aside(tmp_path):
+    from pipeline.stage3.inputs import collect
+
+    run = tmp_path / "run"
+    build(run, n_episodes=2, n_quarantined=0, wrist=False)
+    _edit(run, 1, key="bogus")  # every later step splits the key into suite/task/episode
+    units = {u.key: u for u in collect(run)}
+    bad = units[f"{SUITE}/{TASK}/{EP(1)}"].quarantine
+    assert (bad.reason, bad.field) == ("key_mismatch", "key") and "bogus" in bad.detail
+    assert units[f"{SUITE}/{TASK}/{EP(0)}"].localization is not None and "bogus" not in units
