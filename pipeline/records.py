@@ -56,14 +56,17 @@ def episode_key(suite: str, task: str, ep_id: str) -> str:
     return f"{suite}/{task}/{ep_id}"
 
 
+_NAME = r"^[^/]+$"  # a key part and a folder name: not empty, no slash
+
+
 class EpisodeRecord(Record):
     """Stage 1 output: one rollout of a failure-generator policy."""
 
-    suite: str
-    task: str
+    suite: str = Field(pattern=_NAME)
+    task: str = Field(pattern=_NAME)
     task_index: int
     instruction: str
-    episode_id: str
+    episode_id: str = Field(pattern=_NAME)
     init_state: int
     policy: str
     policy_kind: str

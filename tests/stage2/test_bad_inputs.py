@@ -48,9 +48,14 @@ def test_one_bad_manifest_cell_sets_that_row_aside_and_reads_the_others(stage1_r
     manifest = tmp_path / "episodes.parquet"
     shutil.copy(stage1_run / "stage1" / "episodes.parquet", manifest)
     spoil_manifest_cell(manifest, episodes["miss"].episode_id, "policy_params", "{oops")
+    spoil_manifest_cell(manifest, episodes["idle"].episode_id, "control_hz", 0)
+    spoil_manifest_cell(manifest, episodes["success"].episode_id, "suite", "")
     good, bad = read_episode_rows(manifest)
-    assert len(good) == len(episodes) - 1 and [b.key for b in bad] == [episodes["miss"].key]
-    assert bad[0].field == "policy_params" and bad[0].success is False
+    assert len(good) == len(episodes) - 3
+    bad = {b.field: b for b in bad}
+    assert bad["policy_params"].key == episodes["miss"].key and bad["policy_params"].success is False
+    assert bad["control_hz"].key == episodes["idle"].key
+    assert bad["suite"].key.startswith("unknown_suite/") and bad["suite"].success is True  # a success: skipped
 
 
 @pytest.mark.sim
