@@ -92,3 +92,12 @@ def test_bad_episode_inputs_are_set_aside_and_picked_up_once_fixed(stage1_run, e
     summary = run(cfg)
     assert summary["set_aside"] == 0 and summary["scenes"] == 3
     assert {p.stem for p in (run_dir / "stage2" / "quarantine").rglob("*.json")} == {episodes["idle"].episode_id}
+
+
+def test_a_manifest_that_cannot_be_read_at_all_is_fatal_and_named(tmp_path):
+    from pipeline.errors import FatalError
+
+    (tmp_path / "stage1").mkdir()
+    (tmp_path / "stage1" / "episodes.parquet").write_bytes(b"PAR1 cut short")
+    with pytest.raises(FatalError, match="episodes.parquet: unreadable stage 1 manifest"):
+        run(Config.model_validate({"run": {"output_dir": str(tmp_path)}}))
