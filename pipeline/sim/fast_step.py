@@ -7,9 +7,13 @@ the same state, then recomputes Jacobians, mass matrix and action constants), th
 ramp, `mj_step`, and 145 observable updates; then a reward, LIBERO's state hooks, a goal
 check and an observation dict. Here each substep is:
 
-- `mj_forward` before the controller, kept: the controller reads kinematics, mass matrix
-  and bias forces of the *current* state, and `mj_step`'s own forward pass sees new
-  controls; replacing it by `mj_step1`/`mj_step2` is not bit-identical (tested).
+- `mj_step1`, the position and velocity half of `mj_step`'s forward pass: the controller
+  reads kinematics, Jacobians, mass matrix and bias forces of the current state from it.
+  robosuite runs a whole `mj_forward` here (whose acceleration and constraint half is
+  thrown away: `mj_step` recomputes it with the new controls, and the solver's warm start
+  is saved only when the state advances, not by `mj_forward`), then `mj_step`, which
+  repeats the position and velocity half. `split=False` keeps robosuite's
+  `mj_forward` + `mj_step` (for the benchmark's per-removal figures).
 - the controller's own `mj_forward`: dropped (same inputs, same outputs).
 - one `mj_jacSite` call for both Jacobians (robosuite calls it four times: position and
   rotation, each for the Jacobian and again for the site velocity).
@@ -17,7 +21,7 @@ check and an observation dict. Here each substep is:
   `orientation_error`) on arrays of the same layout, so the floats are the same;
   torque limits, gripper control range and index lists read once per controller.
 - the Panda gripper's command ramp (`current_action`), kept: it carries over between steps.
-- `mj_step`.
+- `mj_step2` (the acceleration half and the integration), or `mj_step` when not split.
 
 Dropped entirely: observables (per substep and the final observation dict; nothing of
 ours reads them), the reward (a second goal check), the robot's `recent_*` history
@@ -120,8 +124,9 @@ class _Bound:
 class FastStepper:
     """Steps one LIBERO (robosuite) environment; see the module docstring."""
 
-    def __init__(self, env):
+    def __init__(self, env, split: bool = True):
         self.env = env
+        self.split = split
         self._bound: _Bound | None = None
         self.substeps = int(round(env.control_timestep / env.model_timestep))
         if abs(self.substeps * env.model_timestep - env.control_timestep) > 1e-12:
@@ -147,8 +152,9 @@ class FastStepper:
         arm_action, gripper_action = action[: b.control_dim], action[b.control_dim :]
         grip_delta = b.grip_sign * np.sign(gripper_action)
         env.timestep += 1
+        first, second = (mujoco.mj_step1, mujoco.mj_step2) if self.split else (mujoco.mj_forward, mujoco.mj_step)
         for i in range(self.substeps):
-            mujoco.mj_forward(m, d)
+            first(m, d)
             if i == 0:
                 if c.new_update:
                     b.update()
@@ -159,7 +165,7 @@ class FastStepper:
             g.current_action = np.clip(g.current_action + grip_delta, -1.0, 1.0)
             d.ctrl[b.grip_actuators] = b.grip_bias + b.grip_weight * g.current_action
             d.ctrl[b.arm_actuators] = torques
-            mujoco.mj_step(m, d)
+            second(m, d)
         env.cur_time += env.control_timestep
         env.done = (env.timestep >= env.horizon) and not env.ignore_done
         env._post_process()
