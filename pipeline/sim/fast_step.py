@@ -44,11 +44,31 @@ class UnsupportedController(RuntimeError):
     """The environment's controller is not the fixed-impedance delta OSC LIBERO uses."""
 
 
+try:  # np.clip's own ufunc without its Python wrappers: the same floats, less overhead
+    from numpy.core.umath import clip as _clip
+except ImportError:  # pragma: no cover
+    _clip = np.clip
+
+
+def _as_slice(index):
+    """A slice for a run of consecutive indices (a view, not a gather), else the list."""
+    idx = [int(i) for i in np.atleast_1d(index)]
+    if idx and idx == list(range(idx[0], idx[0] + len(idx))):
+        return slice(idx[0], idx[0] + len(idx))
+    return idx
+
+
 class _Bound:
     """Per-controller constants and views (a soft reset builds a new controller)."""
 
     def __init__(self, env, robot, controller):
         from robosuite.controllers.osc import OperationalSpaceController
+        from robosuite.utils import control_utils
+
+        # robosuite's own (numba) kernels: the same floats as its controller
+        self.opspace_matrices = control_utils.opspace_matrices
+        self.nullspace_torques = control_utils.nullspace_torques
+        self.orientation_error = control_utils.orientation_error
 
         c = controller
         if not (
@@ -65,20 +85,21 @@ class _Bound:
         self.m = env.sim.model._model
         self.d = env.sim.data._data
         self.site_id = env.sim.model.site_name2id(c.eef_name)
-        self.qpos_index = c.qpos_index
-        self.qvel_index = c.qvel_index
+        self.qpos_index = _as_slice(c.qpos_index)  # exact copies either way; slices are cheaper
+        self.qvel_index = _as_slice(c.qvel_index)
+        self.qvel_list = list(c.qvel_index)
         self.jacp = np.zeros((3, self.m.nv))
         self.jacr = np.zeros((3, self.m.nv))
         self.full_m = np.ndarray(shape=(self.m.nv, self.m.nv), dtype=np.float64, order="C")
         self.kp_pos, self.kp_ori = np.array(c.kp[0:3]), np.array(c.kp[3:6])
         self.kd_pos, self.kd_ori = c.kd[0:3], c.kd[3:6]
         self.torque_low, self.torque_high = robot.torque_limits
-        self.arm_actuators = robot._ref_joint_actuator_indexes
+        self.arm_actuators = _as_slice(robot._ref_joint_actuator_indexes)
         self.control_dim = c.control_dim
         g = robot.gripper
         self.gripper = g
-        self.grip_actuators = [env.sim.model.actuator_name2id(a) for a in g.actuators]
-        ctrl_range = env.sim.model.actuator_ctrlrange[self.grip_actuators]
+        self.grip_actuators = _as_slice([env.sim.model.actuator_name2id(a) for a in g.actuators])
+        ctrl_range = np.atleast_2d(env.sim.model.actuator_ctrlrange[self.grip_actuators])
         self.grip_bias = 0.5 * (ctrl_range[:, 1] + ctrl_range[:, 0])
         self.grip_weight = 0.5 * (ctrl_range[:, 1] - ctrl_range[:, 0])
         self.grip_sign = np.array([-1.0, 1.0]) * g.speed
@@ -87,35 +108,36 @@ class _Bound:
         """robosuite's `Controller.update` minus its `mj_forward` (the caller just ran one)."""
         c, d = self.controller, self.d
         mujoco.mj_jacSite(self.m, d, self.jacp, self.jacr, self.site_id)
-        c.ee_pos = np.array(d.site_xpos[self.site_id])
-        c.ee_ori_mat = np.array(d.site_xmat[self.site_id].reshape([3, 3]))
+        c.ee_pos = d.site_xpos[self.site_id].copy()
+        c.ee_ori_mat = d.site_xmat[self.site_id].reshape(3, 3).copy()
         c.ee_pos_vel = np.dot(self.jacp, d.qvel)
         c.ee_ori_vel = np.dot(self.jacr, d.qvel)
-        c.joint_pos = np.array(d.qpos[self.qpos_index])
-        c.joint_vel = np.array(d.qvel[self.qvel_index])
-        c.J_pos = self.jacp[:, self.qvel_index]  # fancy indexing: C-contiguous copies, as robosuite
-        c.J_ori = self.jacr[:, self.qvel_index]
-        c.J_full = np.vstack([c.J_pos, c.J_ori])
+        c.joint_pos = d.qpos[self.qpos_index].copy()
+        c.joint_vel = d.qvel[self.qvel_index].copy()
+        # robosuite's exact expressions: indexing columns with a list gives Fortran-ordered
+        # arrays, and the numba kernels and BLAS round differently for other layouts
+        c.J_pos = self.jacp[:, self.qvel_list]
+        c.J_ori = self.jacr[:, self.qvel_list]
+        c.J_full = np.concatenate((c.J_pos, c.J_ori))  # = np.vstack, layout included
         mujoco.mj_fullM(self.m, self.full_m, d.qM)
-        c.mass_matrix = self.full_m[self.qvel_index, :][:, self.qvel_index]
+        c.mass_matrix = self.full_m[self.qvel_list, :][:, self.qvel_list]
         c.new_update = False
 
     def torques(self) -> np.ndarray:
         """robosuite's `OperationalSpaceController.run_controller` (fixed, uncoupled, no
         interpolators), same operations in the same order."""
-        from robosuite.utils.control_utils import nullspace_torques, opspace_matrices, orientation_error
-
         c = self.controller
         if c.new_update:
             self.update()
         position_error = c.goal_pos - c.ee_pos
         desired_force = position_error * self.kp_pos + (-c.ee_pos_vel) * self.kd_pos
-        ori_error = orientation_error(c.goal_ori, c.ee_ori_mat)
+        ori_error = self.orientation_error(c.goal_ori, c.ee_ori_mat)
         desired_torque = ori_error * self.kp_ori + (-c.ee_ori_vel) * self.kd_ori
-        _, lambda_pos, lambda_ori, nullspace_matrix = opspace_matrices(c.mass_matrix, c.J_full, c.J_pos, c.J_ori)
+        # lambda_full (first) only feeds the null-space matrix, computed inside
+        _, lambda_pos, lambda_ori, nullspace_matrix = self.opspace_matrices(c.mass_matrix, c.J_full, c.J_pos, c.J_ori)
         decoupled_wrench = np.concatenate([np.dot(lambda_pos, desired_force), np.dot(lambda_ori, desired_torque)])
         torques = np.dot(c.J_full.T, decoupled_wrench) + self.d.qfrc_bias[self.qvel_index]
-        torques += nullspace_torques(c.mass_matrix, nullspace_matrix, c.initial_joint, c.joint_pos, c.joint_vel)
+        torques += self.nullspace_torques(c.mass_matrix, nullspace_matrix, c.initial_joint, c.joint_pos, c.joint_vel)
         c.torques = torques
         c.new_update = True
         return torques
@@ -159,10 +181,10 @@ class FastStepper:
                 if c.new_update:
                     b.update()
                 c.set_goal(arm_action)  # robosuite's own; its update() is a no-op now
-            torques = np.clip(b.torques(), b.torque_low, b.torque_high)
+            torques = _clip(b.torques(), b.torque_low, b.torque_high)
             robot.torques = torques
             g = b.gripper
-            g.current_action = np.clip(g.current_action + grip_delta, -1.0, 1.0)
+            g.current_action = _clip(g.current_action + grip_delta, -1.0, 1.0)
             d.ctrl[b.grip_actuators] = b.grip_bias + b.grip_weight * g.current_action
             d.ctrl[b.arm_actuators] = torques
             second(m, d)
