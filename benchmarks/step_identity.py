@@ -23,7 +23,7 @@ import numpy as np  # noqa: E402
 from pipeline.config import ScriptedNoise, ScriptedPolicyConfig  # noqa: E402
 from pipeline.policies.scripted import make_scripted_policy  # noqa: E402
 from pipeline.sim import SimEnv, tasks  # noqa: E402
-from pipeline.sim.step_check import compare, expert_actions  # noqa: E402
+from pipeline.sim.step_check import compare, expert_episode  # noqa: E402
 
 SUITES = ["libero_spatial", "libero_object", "libero_goal", "libero_10", "libero_90"]
 NOISE = ScriptedNoise(grasp_offset_m=0.02, approach_height_m=0.015, gripper_timing_steps=6, action_noise=0.2,
@@ -47,7 +47,8 @@ def main() -> int:
                 rng = np.random.default_rng(args.seed)
                 random = compare(env, args.init, rng.uniform(-1, 1, (steps, 7)))
                 policy = make_scripted_policy(ScriptedPolicyConfig(noise=NOISE))
-                expert = compare(env, args.init, expert_actions(env, policy, args.init, steps, args.seed))
+                played = expert_episode(env, policy, args.init, steps, args.seed)
+                expert = compare(env, args.init, played.actions, reference=played)
             for label, c in (("random", random), ("expert+noise", expert)):
                 verdict = "identical" if c.identical else (
                     f"DIFFERENT (first state mismatch {c.first_state_mismatch}, goal {c.first_goal_mismatch})")

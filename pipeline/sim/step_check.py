@@ -39,23 +39,48 @@ def _play(env: SimEnv, init: int, actions: np.ndarray, fast: bool) -> tuple[np.n
     return np.array(states), np.array(goals)
 
 
-def expert_actions(env: SimEnv, policy, init: int, steps: int, seed: int, chunk: int = 8) -> np.ndarray:
-    """The actions `policy` takes over `steps` steps from init state `init`, robosuite stepping."""
+@dataclass
+class Played:
+    actions: np.ndarray
+    states: np.ndarray  # after each step
+    goals: np.ndarray
+
+
+def expert_episode(env: SimEnv, policy, init: int, steps: int, seed: int, chunk: int = 8) -> Played:
+    """What `policy` does over `steps` steps from init state `init`, robosuite stepping."""
     from pipeline.rollout import run_episode
 
+    fast_before = env.fast_step
     env.fast_step = False
     env.reset_to_init(init)
     policy.reset(env.task, seed)
-    taken: list[np.ndarray] = []
-    run_episode(env, policy, steps, chunk, stop_on_success=False, on_step=lambda info: taken.append(info.action))
-    return np.array(taken)
+    actions, states, goals = [], [], []
+
+    def on_step(info) -> None:
+        actions.append(info.action)
+        states.append(env.get_state())
+        goals.append(info.goal)
+
+    try:
+        run_episode(env, policy, steps, chunk, stop_on_success=False, on_step=on_step)
+    finally:
+        env.fast_step = fast_before
+    return Played(np.array(actions), np.array(states), np.array(goals))
 
 
-def compare(env: SimEnv, init: int, actions: np.ndarray) -> Comparison:
-    """Play `actions` through robosuite's step and through the fast step; leaves fast on."""
+def expert_actions(env: SimEnv, policy, init: int, steps: int, seed: int, chunk: int = 8) -> np.ndarray:
+    return expert_episode(env, policy, init, steps, seed, chunk).actions
+
+
+def compare(env: SimEnv, init: int, actions: np.ndarray, reference: Played | None = None) -> Comparison:
+    """Play `actions` through the fast step and compare with robosuite's step playing them
+    (played here unless `reference` holds that run already)."""
     fast_before = env.fast_step
     try:
-        ref_s, ref_g = _play(env, init, actions, fast=False)
+        if reference is None:
+            ref_s, ref_g = _play(env, init, actions, fast=False)
+        else:
+            ref_s, ref_g = reference.states, reference.goals
         new_s, new_g = _play(env, init, actions, fast=True)
     finally:
         env.fast_step = fast_before

@@ -8,7 +8,7 @@ import pytest
 from pipeline.config import ScriptedNoise, ScriptedPolicyConfig
 from pipeline.policies.scripted import make_scripted_policy
 from pipeline.sim import SimEnv, tasks
-from pipeline.sim.step_check import compare, expert_actions
+from pipeline.sim.step_check import compare, expert_episode
 
 SUITES = ["libero_spatial", "libero_object", "libero_goal", "libero_10", "libero_90"]
 NOISY = ScriptedPolicyConfig(noise=ScriptedNoise(grasp_offset_m=0.02, approach_height_m=0.015,
@@ -25,7 +25,8 @@ def test_fast_step_matches_robosuite_bit_for_bit(suite):
         random = compare(env, 0, rng.uniform(-1, 1, (150, 7)))
         assert random.identical, f"{suite} random actions: {random}"
         # the scripted expert with noise: grasps, lifts, places (contacts under load)
-        expert = compare(env, 1, expert_actions(env, make_scripted_policy(NOISY), 1, 200, seed=3))
+        played = expert_episode(env, make_scripted_policy(NOISY), 1, 200, seed=3)
+        expert = compare(env, 1, played.actions, reference=played)
         assert expert.identical, f"{suite} scripted expert: {expert}"
 
 
