@@ -180,34 +180,9 @@ def timed(label: str, fn, units) -> float:
     return dt
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--config", default="configs/smoke.yaml", help="policy and noise come from here")
-    ap.add_argument("--suite", default="libero_spatial")
-    ap.add_argument("--task-index", type=int, default=0)
-    ap.add_argument("--episodes", type=int, default=4)
-    ap.add_argument("--horizon", type=int, default=160)
-    ap.add_argument("--fps", type=int, default=4, help="video fps (the configs use 4)")
-    ap.add_argument("--resolution", type=int, default=256)
-    ap.add_argument("--skip-workers", action="store_true", help="only the one-core comparison")
-    args = ap.parse_args()
-
+def one_core(args, task, cfg, units, tmp: Path) -> None:
+    """The in-process comparisons: control step, floors, ours, other stages, naive."""
     from pipeline.policies.factory import make_policy
-    from pipeline.sim.registry import tasks as list_tasks
-    from pipeline.stage1.run import run
-
-    task = list_tasks([args.suite])[args.task_index]
-    tmp = Path(tempfile.mkdtemp(prefix="stage1-bench-"))
-    cfg = load_config(args.config, {
-        "run.output_dir": str(tmp / "inproc"), "tasks.suites": [args.suite], "tasks.tasks": [task.name],
-        "tasks.max_tasks_per_suite": None, "tasks.init_states": list(range(args.episodes)),
-        "stage1.rollout.horizon": args.horizon, "stage1.rollout.stop_on_success": False,
-        "stage1.video.cameras": ["agentview", "robot0_eye_in_hand"], "stage1.video.fps": args.fps,
-        "stage1.video.resolution": args.resolution, "stage1.video.render": "all",
-    })
-    units = plan_units(cfg)
-    print(f"{len(units)} episodes of {task.task_id}, horizon {args.horizon} (no early stop), "
-          f"2 cameras {args.resolution}px at {args.fps} fps, policy {cfg.stage1.policy.kind}; output {tmp}")
 
     from step_cost import control_step_costs
 
@@ -252,6 +227,40 @@ def main() -> None:
           f"ours (fast) is {t_ours / t_floor:.2f}x the physics-only floor; the fast step made the floor "
           f"{t_floor_old / t_floor:.2f}x and ours {t_ours_old / t_ours:.2f}x faster")
 
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--config", default="configs/smoke.yaml", help="policy and noise come from here")
+    ap.add_argument("--suite", default="libero_spatial")
+    ap.add_argument("--task-index", type=int, default=0)
+    ap.add_argument("--episodes", type=int, default=4)
+    ap.add_argument("--horizon", type=int, default=160)
+    ap.add_argument("--fps", type=int, default=4, help="video fps (the configs use 4)")
+    ap.add_argument("--resolution", type=int, default=256)
+    ap.add_argument("--skip-workers", action="store_true", help="only the one-core comparison")
+    ap.add_argument("--workers-only", action="store_true",
+                    help="only stage1.run with 1 and 2 workers (use more --episodes: each worker builds its environment once)")
+    args = ap.parse_args()
+
+    from pipeline.sim.registry import tasks as list_tasks
+    from pipeline.stage1.run import run
+
+    task = list_tasks([args.suite])[args.task_index]
+    tmp = Path(tempfile.mkdtemp(prefix="stage1-bench-"))
+    cfg = load_config(args.config, {
+        "run.output_dir": str(tmp / "inproc"), "tasks.suites": [args.suite], "tasks.tasks": [task.name],
+        "tasks.max_tasks_per_suite": None, "tasks.init_states": list(range(args.episodes)),
+        "stage1.rollout.horizon": args.horizon, "stage1.rollout.stop_on_success": False,
+        "stage1.video.cameras": ["agentview", "robot0_eye_in_hand"], "stage1.video.fps": args.fps,
+        "stage1.video.resolution": args.resolution, "stage1.video.render": "all",
+    })
+    units = plan_units(cfg)
+    print(f"{len(units)} episodes of {task.task_id}, horizon {args.horizon} (no early stop), "
+          f"2 cameras {args.resolution}px at {args.fps} fps, policy {cfg.stage1.policy.kind}; output {tmp}")
+
+    if not args.workers_only:
+        one_core(args, task, cfg, units, tmp)
     if args.skip_workers:
         return
     print("stage1.run end to end (spawn + build + episodes), local executor:")
