@@ -18,3 +18,55 @@ def explode(item, emit):
     if item == 2:
         raise ValueError(f"item {item} is broken")
     return item
+
+
+def write_once(item, emit):
+    """Fault-test work: `item` is (folder, name, die); writes folder/out/<name> atomically.
+
+    die "first": SIGKILL its own worker on the first attempt (a marker file remembers it);
+    "always": on every attempt. Each attempt appends a line to folder/attempts/<name>, so a
+    test can count how often an item ran; the output is renamed into place, never appended.
+    """
+    import signal
+    from pathlib import Path
+
+    from pipeline.atomic import write_text
+
+    folder, name, die = item
+    folder = Path(folder)
+    (folder / "attempts").mkdir(parents=True, exist_ok=True)
+    with open(folder / "attempts" / name, "a") as f:
+        f.write(f"{os.getpid()}\n")
+    emit({"item": name, "pid": os.getpid()})
+    marker = folder / "died" / name
+    if die == "always" or (die == "first" and not marker.exists()):
+        marker.parent.mkdir(parents=True, exist_ok=True)
+        marker.touch()
+        os.kill(os.getpid(), signal.SIGKILL)
+    write_text(folder / "out" / name, f"{name}\n")
+    return name
+
+
+def slow_write(item, emit):
+    """Ray fault-test work: (folder, name, seconds) -> sleeps, then writes folder/<name> atomically."""
+    import time
+    from pathlib import Path
+
+    import ray
+
+    from pipeline.atomic import write_text
+
+    folder, name, seconds = item
+    emit({"item": name, "node": ray.get_runtime_context().get_node_id()})
+    time.sleep(seconds)
+    write_text(Path(folder) / name, f"{name}\n")
+    return name
+
+
+_RUN_HERE = 0  # items this worker process has run: module globals live as long as the worker
+
+
+def counted(item, emit):
+    global _RUN_HERE
+    _RUN_HERE += 1
+    return os.getpid(), _RUN_HERE
