@@ -143,7 +143,10 @@ class LocalExecutor(Executor):
                 return
             i, w.item = w.item, None
             if msg[0] == "error":
-                exc = pickle.loads(msg[1])
+                try:
+                    exc = pickle.loads(msg[1])
+                except Exception:  # its class exists only where the worker imported it
+                    exc = RuntimeError(msg[2].strip().splitlines()[-1])
                 exc.__cause__ = _RemoteTraceback(msg[2])
                 raise exc
             results[i] = msg[1]
