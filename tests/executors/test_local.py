@@ -42,7 +42,8 @@ def _attempts(tmp_path, name: str) -> int:
 
 def test_a_worker_killed_under_an_item_costs_only_that_item_one_attempt(tmp_path):
     names = [f"u{i}" for i in range(6)]
-    items = [(str(tmp_path), n, "first" if n == "u1" else "") for n in names]
+    modes = {"u0": "wait:u1", "u1": "first"}  # u0 is in flight in the other worker when u1's dies
+    items = [(str(tmp_path), n, modes.get(n, "")) for n in names]
     events = []
     ex = LocalExecutor(workers=2)
     assert ex.run(write_once, items, events.append, label=lambda i, it: it[1]) == names

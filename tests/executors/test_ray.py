@@ -9,7 +9,7 @@ import pytest
 from pipeline.config import ExecutorConfig
 from pipeline.executors import SetAside, make_executor
 from pipeline.executors.ray import RayExecutor
-from work_fns import explode, read_env, slow_write, square
+from work_fns import explode, read_env, slow_write, square, write_once
 
 import ray  # noqa: E402,F401  (a missing ray must fail here, not skip)
 from ray.cluster_utils import Cluster  # noqa: E402
@@ -29,6 +29,18 @@ def test_ray_runs_items_relays_events_and_sets_worker_env():
     assert ex.run(read_env, ["LP_NUM_THREADS"]) == ["1"]
     with pytest.raises(Exception, match="item 2 is broken"):
         ex.run(explode, [1, 2, 3])
+
+
+@pytest.mark.slow
+def test_a_crashed_ray_worker_costs_its_item_one_attempt_and_a_crash_every_time_sets_it_aside(tmp_path):
+    dies = {"a": "", "b": "first", "c": "always", "d": ""}
+    ex = RayExecutor(workers=2, worker_env=WORKER_ENV, max_retries=1)
+    results = ex.run(write_once, [(str(tmp_path), n, d) for n, d in dies.items()], label=lambda i, it: it[1])
+    assert results[:2] == ["a", "b"] and results[3] == "d"
+    assert isinstance(results[2], SetAside) and results[2].attempts == 2
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["a", "b", "d"]
+    assert sorted(r.label for r in ex.report.retried) == ["b", "c"]
+    assert all(r.reason.startswith("WorkerCrashedError") for r in ex.report.retried)
 
 
 @pytest.fixture

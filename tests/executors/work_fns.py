@@ -21,28 +21,35 @@ def explode(item, emit):
 
 
 def write_once(item, emit):
-    """Fault-test work: `item` is (folder, name, die); writes folder/out/<name> atomically.
+    """Fault-test work: `item` is (folder, name, mode); writes folder/out/<name> atomically.
 
-    die "first": SIGKILL its own worker on the first attempt (a marker file remembers it);
-    "always": on every attempt. Each attempt appends a line to folder/attempts/<name>, so a
-    test can count how often an item ran; the output is renamed into place, never appended.
+    mode "first": SIGKILL its own worker on the first attempt (a marker file in folder/died
+    remembers it); "always": on every attempt; "wait:<other>": stay in flight until <other>'s
+    worker has died (so a death provably happens while this item runs). Each attempt appends
+    a line to folder/attempts/<name>, so a test can count how often an item ran.
     """
     import signal
+    import time
     from pathlib import Path
 
     from pipeline.atomic import write_text
 
-    folder, name, die = item
+    folder, name, mode = item
     folder = Path(folder)
     (folder / "attempts").mkdir(parents=True, exist_ok=True)
     with open(folder / "attempts" / name, "a") as f:
         f.write(f"{os.getpid()}\n")
     emit({"item": name, "pid": os.getpid()})
     marker = folder / "died" / name
-    if die == "always" or (die == "first" and not marker.exists()):
+    if mode == "always" or (mode == "first" and not marker.exists()):
         marker.parent.mkdir(parents=True, exist_ok=True)
         marker.touch()
         os.kill(os.getpid(), signal.SIGKILL)
+    if mode.startswith("wait:"):
+        deadline = time.time() + 60
+        while not (folder / "died" / mode[5:]).exists() and time.time() < deadline:
+            time.sleep(0.01)
+        time.sleep(0.2)  # still running when the caller sees the other worker die
     write_text(folder / "out" / name, f"{name}\n")
     return name
 
