@@ -119,7 +119,7 @@ class LocalExecutor(Executor):
 
         def spawn() -> _Worker:
             parent, child = ctx.Pipe()
-            proc = ctx.Process(target=_worker_main, args=(child, self.worker_env), daemon=True)
+            proc = ctx.Process(target=_worker_main, args=(child, self.worker_env))
             proc.start()
             child.close()  # so the caller's end sees EOF when the worker dies
             w = _Worker(proc, parent)
