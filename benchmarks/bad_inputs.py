@@ -2,9 +2,10 @@
 
 Each case feeds the real component (parser, config loader, review server on loopback with
 SQLite, `recover verify`, a rendering process, torch_compat, the transformers backend on a
-tiny Qwen) the input that broke the landed code, and prints `handled: <what it did>`. A case
-that raises or misbehaves prints `NOT HANDLED: ...`; the exit status is the number of those.
-Cases not built yet print `open: ...` (slots for the stage-2/3 quarantine and executor work).
+tiny Qwen, `recover stage2` on real rollouts, `recover stage3` on a sample run) the input
+that broke the landed code, and prints `handled: <what it did>`. A case that raises or
+misbehaves prints `NOT HANDLED: ...`; the exit status is the number of those.
+Cases not built yet print `open: ...` (the slot for the no-op revision).
 
     MUJOCO_GL=egl .venv/bin/python benchmarks/bad_inputs.py [--only SUBSTRING] [--skip-slow]
 """
@@ -254,6 +255,84 @@ def _(_tmp):
     return "exit 0, no 'Exception ignored in GLContext.__del__' in its output"
 
 
+def _spawned_children() -> list[int]:
+    out = []
+    for task in Path(f"/proc/{os.getpid()}/task").iterdir():
+        for pid in (task / "children").read_text().split():
+            try:
+                if b"spawn_main" in Path(f"/proc/{pid}/cmdline").read_bytes():
+                    out.append(int(pid))
+            except FileNotFoundError:
+                pass
+    return out
+
+
+@case("local executor: kill -9 of one stage-1 worker", slow=True)
+def _(tmp):
+    import io
+    import json
+    import signal
+    import threading
+    import time
+
+    from rich.console import Console
+
+    from pipeline.config import Config
+    from pipeline.stage1.run import run
+
+    cfg = Config.model_validate({
+        "run": {"name": "kill9", "output_dir": str(tmp / "run")},
+        "tasks": {"suites": ["libero_spatial"], "max_tasks_per_suite": 1, "init_states": [0, 1, 2, 3, 4, 5]},
+        "stage1": {"rollout": {"horizon": 40}, "video": {"render": "none"}},
+    })
+    stage1 = tmp / "run" / "stage1"
+    killed = []
+
+    def kill_a_worker_mid_shard() -> None:
+        deadline = time.time() + 300
+        while time.time() < deadline and not list((stage1 / "_done").glob("*.done")):
+            time.sleep(0.05)
+        killed.append(_spawned_children()[0])
+        os.kill(killed[0], signal.SIGKILL)
+
+    killer = threading.Thread(target=kill_a_worker_mid_shard, daemon=True)
+    killer.start()
+    result = run(cfg, console=Console(file=io.StringIO()))
+    killer.join()
+    report = json.loads((stage1 / "summary.json").read_text())["executor"]
+    assert killed and result["done"] == result["planned"] == 6 and not result["errors"], result
+    assert len(report["retried"]) == 1 and not report["set_aside"], report
+    return f"worker pid {killed[0]} killed: its shard retried, {result['done']}/6 episodes done once"
+
+
+@case("Ray executor: a worker node removed mid-run", slow=True)
+def _(tmp):
+    from ray.cluster_utils import Cluster
+
+    from pipeline.executors.ray import RayExecutor
+    from tests.executors.work_fns import slow_write
+
+    cluster = Cluster(initialize_head=True, head_node_args={"num_cpus": 0})  # tasks only on worker nodes
+    try:
+        _, doomed = [cluster.add_node(num_cpus=1, resources={n: 1}) for n in ("node_a", "node_b")]
+        cluster.wait_for_nodes()
+        names = [f"u{i}" for i in range(6)]
+        seen = []
+
+        def on_event(ev) -> None:
+            if ev["node"] == doomed.node_id and not seen:
+                seen.append(ev["item"])
+                cluster.remove_node(doomed)
+
+        ex = RayExecutor(workers=2, address=cluster.address, worker_env={"PYTHONPATH": str(REPO)})
+        results = ex.run(slow_write, [(str(tmp / "out"), n, 1.0) for n in names], on_event)
+    finally:
+        cluster.shutdown()
+    files = sorted(p.name for p in (tmp / "out").iterdir() if not p.name.startswith("."))
+    assert seen and results == names == files and not ex.report.set_aside, (seen, results, files)
+    return f"node removed under {seen[0]}: {len(ex.report.retried)} task(s) resubmitted, 6/6 outputs, none twice"
+
+
 # -- the VLM path on a GPU machine ----------------------------------------------------------
 
 
@@ -293,12 +372,118 @@ def _(tmp):
     return f"second_per_grid_ts {step} for {len(result.video.frames_indices)} frames (landed: 0.98)"
 
 
-# -- slots: handled by the stage-runner work (issue 15) and its follow-up ---------------------
+# -- stage 2 and stage 3 set bad input aside ------------------------------------------------
 
-slot("stage 2: truncated states.npy / steps.parquet, bad manifest cell", "stage runner")
-slot("stage 3: NaN or negative fail_time_s, repeated key, stale done marker", "stage runner")
-slot("local executor: kill -9 of one stage-1 worker", "executors")
-slot("Ray executor: a worker node removed mid-run", "executors")
+
+def _recover(*args: str) -> subprocess.CompletedProcess:
+    env = dict(os.environ, PYTHONPATH=str(REPO), COLUMNS="300")
+    env.setdefault("MUJOCO_GL", "egl")
+    return subprocess.run([sys.executable, "-c", "from pipeline.cli import main; main()", *args],
+                          capture_output=True, text=True, timeout=600, cwd=REPO, env=env, stdin=subprocess.DEVNULL)
+
+
+def _config(tmp: Path, run: Path, **extra) -> Path:
+    import yaml
+
+    path = tmp / "c.yaml"
+    path.write_text(yaml.safe_dump({"run": {"output_dir": str(run)}, "executor": {"workers": 1}, **extra}))
+    return path
+
+
+@case("stage 2: truncated states.npy / steps.parquet, bad manifest cell", slow=True)
+def _(tmp):
+    import json
+    import shutil
+
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from pipeline.records import EPISODE_SCHEMA, read_episodes
+
+    # the real rollouts of tests/stage2 (built once, ~1 min, then reused from pytest's cache)
+    cache = REPO / ".pytest_cache" / "d" / "stage2-rollouts"
+    built = _python(f"from tests.stage2.rollouts import make_fixture_run; print(make_fixture_run({str(cache)!r}))",
+                    timeout=900)
+    assert built.returncode == 0, built.stderr[-800:]
+    src = Path(built.stdout.strip().splitlines()[-1])
+    run = tmp / "run"
+    shutil.copytree(src, run)
+    s1 = run / "stage1"
+    eps = {r.policy.removeprefix("fixture_"): r for r in read_episodes(s1 / "episodes.parquet")}
+    for rec, name in ((eps["drop"], "states.npy"), (eps["knock"], "steps.parquet")):
+        data = (s1 / rec.path / name).read_bytes()
+        (s1 / rec.path / name).write_bytes(data[: len(data) // 2])
+    rows = pq.read_table(s1 / "episodes.parquet").to_pylist()
+    for row in rows:
+        if row["episode_id"] == eps["miss"].episode_id:
+            row["policy_params"] = "{oops"
+    pq.write_table(pa.Table.from_pylist(rows, schema=EPISODE_SCHEMA), s1 / "episodes.parquet")
+    cfg = _config(tmp, run, stage2={"history_frames": 0})
+    first = _recover("stage2", "-c", str(cfg))
+    assert first.returncode == 0, first.stderr[-800:]
+    summary = json.loads((run / "stage2" / "summary.json").read_text())
+    faults = {f["key"].rsplit("/", 1)[1].split("-")[0].removeprefix("fixture_"): f"{f['reason']}@{f['field']}"
+              for f in summary["input_faults"]}
+    assert set(faults) == {"drop", "knock", "miss"} and "3 set aside" in first.stdout, (faults, first.stdout[-500:])
+    assert summary["quarantine_reasons"].get("no_failure_found") == 1  # the untouched episode went on
+    for rec in (eps["drop"], eps["knock"]):  # fix: the original files back
+        for name in ("states.npy", "steps.parquet"):
+            shutil.copy2(src / "stage1" / rec.path / name, s1 / rec.path / name)
+    shutil.copy2(src / "stage1" / "episodes.parquet", s1 / "episodes.parquet")
+    second = _recover("stage2", "-c", str(cfg))
+    after = json.loads((run / "stage2" / "summary.json").read_text())
+    assert second.returncode == 0 and after["set_aside"] == 0 and after["scenes"] == 3, (after, second.stderr[-500:])
+    return (f"exit 0, 3 set aside ({', '.join(f'{k}: {v}' for k, v in sorted(faults.items()))}), the rest went on; "
+            f"fixed and rerun: {after['scenes']} scenes, 0 set aside")
+
+
+@case("stage 3: NaN, negative, too late fail_time_s, repeated key, corrected file")
+def _(tmp):
+    import json
+    import math
+
+    import httpx
+
+    from pipeline.review.auth import add_user
+    from pipeline.review.db import make_engine
+    from pipeline.review.sample_run import SUITE, TASK, build
+
+    run = tmp / "run"
+    build(run, n_episodes=5, n_quarantined=0, wrist=False)  # 3.0 s episodes
+    locs = run / "stage2" / "localizations" / SUITE / TASK
+
+    def edit(i: int, **fields) -> None:
+        path = locs / f"scripted-i{i:02d}-s0.json"
+        path.write_text(json.dumps({**json.loads(path.read_text()), **fields}))
+
+    edit(0, fail_time_s=math.nan)
+    edit(1, fail_time_s=-1.0)
+    edit(2, fail_time_s=99.0)
+    edit(4, key=f"{SUITE}/{TASK}/scripted-i03-s0", episode_id="scripted-i03-s0")
+    cfg = _config(tmp, run)
+    first = _recover("stage3", "-c", str(cfg))
+    assert first.returncode == 0 and "4 set aside" in first.stdout, (first.returncode, first.stdout[-800:])
+    summary = json.loads((run / "stage3" / "summary.json").read_text())
+    reasons = sorted(f"{f['reason']}@{f['field']}" for f in summary["input_faults"])
+    # the review API answers every queued item (the landed code queued the NaN and answered 500)
+    from pipeline.review.api import create_app
+    from pipeline.review.server import ThreadedServer
+    from pipeline.review.workflow import QueueSettings
+
+    engine = make_engine(f"sqlite:///{run / 'stage3' / 'review.sqlite'}")
+    token = add_user(engine, "ann", "reviewer")
+    with ThreadedServer(create_app(run, engine, QueueSettings(required_reviews=2))) as server:
+        client = httpx.Client(base_url=server.url, headers={"Authorization": f"Bearer {token}"})
+        ids = [it["id"] for it in client.get("/api/queue").json()["available"]]
+        codes = sorted({client.get(f"/api/items/{i}").status_code for i in ids})
+    engine.dispose()
+    assert len(ids) == 5 and codes == [200], (ids, codes)
+    edit(0, fail_time_s=1.5)  # the NaN corrected
+    second = _recover("stage3", "-c", str(cfg))
+    after = json.loads((run / "stage3" / "summary.json").read_text())
+    assert second.returncode == 0 and after["set_aside"] == 3 and after.get("characterized") == 1, after
+    return (f"exit 0, 4 set aside ({', '.join(reasons)}), all 5 items answer 200; "
+            "the corrected file was read again and queued with its value")
 
 
 def main() -> int:

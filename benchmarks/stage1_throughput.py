@@ -2,9 +2,14 @@
 
     .venv/bin/python benchmarks/stage1_throughput.py [--episodes 4] [--horizon 160]
 
+First the control step itself (benchmarks/step_cost.py's measurement, one environment):
+robosuite's `env.step` (before) and our fast step (after), against the 25 `mj_step` calls
+inside a control step.
+
 Modes, on the same episodes (same task, init states, policy and seeds, same artifacts:
 states.npy, steps.parquet, agentview + wrist MP4 at --fps, frames.parquet):
-  floor       physics only: reset, settle, policy + env.step; nothing recorded or rendered
+  floor       physics only: reset, settle, policy + env.step; nothing recorded or rendered;
+              with robosuite's step (the old floor) and with the fast step (the new one)
   ours        our stage 1 episode (`run_one`): physics-only rollout, then videos
               rendered from the logged states at --fps, at standard quality (LIBERO's
               look) and at fast quality (the stage default: no MSAA, no reflections;
@@ -12,8 +17,13 @@ states.npy, steps.parquet, agentview + wrist MP4 at --fps, frames.parquet):
               failures, which skips the videos of successes
   naive       LIBERO's usual loop: `OffScreenRenderEnv` renders both cameras at every step;
               the frames at --fps go into the same videos
-These three run in this process on one prebuilt environment per mode (environment build
-excluded; one core). Then `stage1.run` itself with 1 and with 2 local workers (spawn,
+These run in this process on one prebuilt environment per mode (environment build
+excluded; one core). "ours" is also run once with robosuite's step, for before/after.
+Then the other stages that step the simulator, before/after in control steps per second:
+the recoverability certificate (pipeline/release/certify.py's `certify_one`: clean expert,
+stop at success, the release's certify horizon) from the episodes' init states, and an
+evaluation trial (pipeline/eval/protocol.py's `run_trial`: perturbation, gripper settle,
+the configured policy, stop at success) from the same states. Then `stage1.run` itself with 1 and with 2 local workers (spawn,
 build, everything included), and with 2 workers without LP_NUM_THREADS=1, for the
 worker speed-up. Other processes on the machine skew the numbers; rerun when quiet.
 """
@@ -110,6 +120,57 @@ def naive_episode(env: NaiveLiberoEnv, policy, unit, cfg, out: Path) -> None:
     write_videos(frames, kept, folder, v.fps)
 
 
+def counting(env: SimEnv) -> list[int]:
+    """Count `env.step` calls (an instance attribute shadows the method)."""
+    n = [0]
+    step = type(env).step
+
+    def counted(action):
+        n[0] += 1
+        return step(env, action)
+
+    env.step = counted
+    return n
+
+
+def other_stages(env: SimEnv, policy, units, cfg, tmp: Path) -> None:
+    """Certificate and eval trial: control steps per second with robosuite's step and ours."""
+    from pipeline.eval.protocol import Trial, run_trial
+    from pipeline.eval.scenes import Scene
+    from pipeline.release.certify import certify_one, make_expert
+
+    expert = make_expert(cfg)
+    n = counting(env)
+    scenes = []
+    for u in units:
+        path = tmp / f"scene-{u.init_state}.npy"
+        np.save(path, env.task.init_states()[u.init_state])
+        scenes.append(Scene(suite=env.task.suite, task=env.task.name, episode_id=f"bench-i{u.init_state:02d}", step=0,
+                            bddl_path=env.task.bddl_path, state_path=path, init_state=u.init_state))
+    jobs = {
+        "certificate": lambda s: certify_one(env, np.load(s.state_path), expert, cfg.release.certify_tries,
+                                             cfg.release.certify_horizon, cfg.stage1.rollout.chunk_size),
+        "eval trial": lambda s: run_trial(env, policy, Trial(
+            scene=s, policy="bench", policy_kind=cfg.stage1.policy.kind, gripper="open", trial=0, seed=0,
+            chunk_size=cfg.stage1.rollout.chunk_size, horizon=cfg.eval.horizon, max_offset_m=cfg.eval.max_offset_m,
+            gripper_settle_steps=cfg.eval.gripper_settle_steps)),
+    }
+    for label, job in jobs.items():
+        rates = {}
+        for fast in (False, True):
+            env.fast_step = fast
+            n[0] = 0
+            t0 = time.perf_counter()
+            for s in scenes:
+                job(s)
+            rates[fast] = n[0] / (time.perf_counter() - t0)
+        print(f"  {label:<28} {rates[False]:6.1f} -> {rates[True]:6.1f} control steps/s "
+              f"(robosuite step -> fast step, {n[0]} steps): {rates[True] / rates[False]:.2f}x", flush=True)
+    env.fast_step = True
+    del env.step
+    expert.close()
+
+
 def timed(label: str, fn, units) -> float:
     t0 = time.perf_counter()
     for u in units:
@@ -117,6 +178,55 @@ def timed(label: str, fn, units) -> float:
     dt = time.perf_counter() - t0
     print(f"  {label:<28} {dt:8.1f} s  {len(units) / dt * 3600:8.0f} episodes/hour", flush=True)
     return dt
+
+
+def one_core(args, task, cfg, units, tmp: Path) -> None:
+    """The in-process comparisons: control step, floors, ours, other stages, naive."""
+    from pipeline.policies.factory import make_policy
+
+    from step_cost import control_step_costs
+
+    c = control_step_costs(task, steps=args.horizon)
+    print(f"control step ({task.task_id}, scripted expert with noise, ms): robosuite {c['robosuite']:.2f} -> fast "
+          f"{c['fast']:.2f} ({c['robosuite'] / c['fast']:.2f}x); the 25 mj_step inside {c['mj_step']:.2f} "
+          f"(robosuite {c['robosuite'] / c['mj_step']:.2f}x it, fast {c['fast'] / c['mj_step']:.2f}x); "
+          f"fast's own physics, 25 x (mj_step1 + mj_step2): {c['split']:.2f}", flush=True)
+
+    print("one core, in process (environment build excluded):")
+    env = SimEnv(task)
+    for quality in ("standard", "fast"):  # renderer creation is a one-off per process: keep it out
+        for cam in ("agentview", "robot0_eye_in_hand"):
+            env.render(cam, args.resolution, quality)
+    policy = make_policy(cfg.stage1.policy)
+    env.fast_step = False
+    t_floor_old = timed("floor, robosuite step (old)", lambda u: floor_episode(env, policy, u, cfg), units)
+    env.fast_step = True
+    t_floor = timed("physics-only floor (new)", lambda u: floor_episode(env, policy, u, cfg), units)
+    def video(**kw):
+        return cfg.model_copy(update={"stage1": cfg.stage1.model_copy(update={
+            "video": cfg.stage1.video.model_copy(update=kw)})})
+
+    std_cfg, fast_cfg = video(quality="standard"), video(quality="fast")
+    t_std = timed("ours, standard video quality", lambda u: run_one(env, policy, u, std_cfg, tmp / "std"), units)
+    t_ours = timed("ours, fast video quality", lambda u: run_one(env, policy, u, fast_cfg, tmp / "ours"), units)
+    env.fast_step = False
+    t_ours_old = timed("ours, fast video, old step", lambda u: run_one(env, policy, u, fast_cfg, tmp / "old"),
+                       units)
+    env.fast_step = True
+    fail_cfg = video(quality="fast", render="failures")
+    t_fail = timed("ours, default (failure videos)", lambda u: run_one(env, policy, u, fail_cfg, tmp / "fail"), units)
+    print("other stages that step the simulator (same init states):")
+    other_stages(env, policy, units, cfg, tmp)
+    env.close()
+    naive_env = NaiveLiberoEnv(task, ["agentview", "robot0_eye_in_hand"], args.resolution)
+    t_naive = timed("naive LIBERO loop", lambda u: naive_episode(naive_env, policy, u, cfg, tmp / "naive"), units)
+    naive_env.close()
+    print(f"  naive / ours: {t_naive / t_std:.2f}x at standard quality (LIBERO's look; naive renders "
+          f"{20 // args.fps}x the frames), {t_naive / t_ours:.2f}x at fast quality (the stage default: no "
+          f"MSAA, no reflections), {t_naive / t_fail:.2f}x with videos of failures only; "
+          f"ours (fast) is {t_ours / t_floor:.2f}x the physics-only floor; the fast step made the floor "
+          f"{t_floor_old / t_floor:.2f}x and ours {t_ours_old / t_ours:.2f}x faster")
+
 
 
 def main() -> None:
@@ -129,9 +239,10 @@ def main() -> None:
     ap.add_argument("--fps", type=int, default=4, help="video fps (the configs use 4)")
     ap.add_argument("--resolution", type=int, default=256)
     ap.add_argument("--skip-workers", action="store_true", help="only the one-core comparison")
+    ap.add_argument("--workers-only", action="store_true",
+                    help="only stage1.run with 1 and 2 workers (use more --episodes: each worker builds its environment once)")
     args = ap.parse_args()
 
-    from pipeline.policies.factory import make_policy
     from pipeline.sim.registry import tasks as list_tasks
     from pipeline.stage1.run import run
 
@@ -148,28 +259,8 @@ def main() -> None:
     print(f"{len(units)} episodes of {task.task_id}, horizon {args.horizon} (no early stop), "
           f"2 cameras {args.resolution}px at {args.fps} fps, policy {cfg.stage1.policy.kind}; output {tmp}")
 
-    print("one core, in process (environment build excluded):")
-    env = SimEnv(task)
-    policy = make_policy(cfg.stage1.policy)
-    t_floor = timed("physics-only floor", lambda u: floor_episode(env, policy, u, cfg), units)
-    def video(**kw):
-        return cfg.model_copy(update={"stage1": cfg.stage1.model_copy(update={
-            "video": cfg.stage1.video.model_copy(update=kw)})})
-
-    std_cfg, fast_cfg = video(quality="standard"), video(quality="fast")
-    t_std = timed("ours, standard video quality", lambda u: run_one(env, policy, u, std_cfg, tmp / "std"), units)
-    t_ours = timed("ours, fast video quality", lambda u: run_one(env, policy, u, fast_cfg, tmp / "ours"), units)
-    fail_cfg = video(quality="fast", render="failures")
-    t_fail = timed("ours, default (failure videos)", lambda u: run_one(env, policy, u, fail_cfg, tmp / "fail"), units)
-    env.close()
-    naive_env = NaiveLiberoEnv(task, ["agentview", "robot0_eye_in_hand"], args.resolution)
-    t_naive = timed("naive LIBERO loop", lambda u: naive_episode(naive_env, policy, u, cfg, tmp / "naive"), units)
-    naive_env.close()
-    print(f"  naive / ours: {t_naive / t_std:.2f}x at standard quality (LIBERO's look; naive renders "
-          f"{20 // args.fps}x the frames), {t_naive / t_ours:.2f}x at fast quality (the stage default: no "
-          f"MSAA, no reflections), {t_naive / t_fail:.2f}x with videos of failures only; "
-          f"ours (fast) is {t_ours / t_floor:.2f}x the physics-only floor")
-
+    if not args.workers_only:
+        one_core(args, task, cfg, units, tmp)
     if args.skip_workers:
         return
     print("stage1.run end to end (spawn + build + episodes), local executor:")

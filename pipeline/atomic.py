@@ -78,6 +78,13 @@ class Completions:
     def mark_done(self, unit_id: str, info: dict | None = None) -> None:
         write_json(self._marker(unit_id), info or {})
 
+    def info(self, unit_id: str) -> dict | None:
+        """What the marker recorded (e.g. the inputs the unit was computed from), None if absent."""
+        try:
+            return json.loads(self._marker(unit_id).read_text() or "{}")
+        except (OSError, ValueError):
+            return None
+
     def done_ids(self) -> set[str]:
         if not self.dir.exists():
             return set()

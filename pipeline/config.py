@@ -178,6 +178,9 @@ class ExecutorConfig(_Strict):
     kind: Literal["local", "ray"] = "local"
     workers: int = Field(default=2, ge=1)
     ray_address: str | None = None
+    # times an item is run again after its worker died under it (kill -9, OOM, a lost Ray
+    # node) before it is set aside with the reason; the run itself goes on either way
+    max_retries: int = Field(default=2, ge=0)
 
 
 class Stage1Config(_Strict):

@@ -24,10 +24,12 @@ class FatalError(RecoverError):
 class EpisodeError(RecoverError):
     """One unit of work failed; record `reason` and continue with the others."""
 
-    def __init__(self, reason: str, detail: str = ""):
+    def __init__(self, reason: str, detail: str = "", file: str | None = None, field: str | None = None):
         super().__init__(f"{reason}: {detail}" if detail else reason)
         self.reason = reason
         self.detail = detail
+        self.file = file  # the input at fault, when one is (becomes QuarantineEntry.file / .field)
+        self.field = field
 
 
 class RetryableError(RecoverError):

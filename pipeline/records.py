@@ -56,14 +56,17 @@ def episode_key(suite: str, task: str, ep_id: str) -> str:
     return f"{suite}/{task}/{ep_id}"
 
 
+_NAME = r"^[^/]+$"  # a key part and a folder name: not empty, no slash
+
+
 class EpisodeRecord(Record):
     """Stage 1 output: one rollout of a failure-generator policy."""
 
-    suite: str
-    task: str
+    suite: str = Field(pattern=_NAME)
+    task: str = Field(pattern=_NAME)
     task_index: int
     instruction: str
-    episode_id: str
+    episode_id: str = Field(pattern=_NAME)
     init_state: int
     policy: str
     policy_kind: str
@@ -71,13 +74,13 @@ class EpisodeRecord(Record):
     seed: int
     chunk_size: int
     horizon: int
-    control_hz: int = 20
+    control_hz: int = Field(20, gt=0)
     settle_steps: int
-    steps: int  # control steps executed by the policy (excluding settle steps)
+    steps: int = Field(ge=0)  # control steps executed by the policy (excluding settle steps)
     success: bool
     first_success_step: int | None = None
     wall_time_s: float
-    state_dim: int
+    state_dim: int = Field(gt=0)
     path: str  # episode folder, relative to the run's stage1/ folder
     videos: dict[str, str] = Field(default_factory=dict)  # camera -> file name
     video_fps: int | None = None
@@ -134,16 +137,58 @@ def episodes_table(records: list[EpisodeRecord]) -> pa.Table:
 
 def read_episodes(path) -> list[EpisodeRecord]:
     """The stage 1 manifest as EpisodeRecords."""
+    import pyarrow.parquet as pq
+
+    return [_episode_from_row(row) for row in pq.read_table(path).to_pylist()]
+
+
+def _episode_from_row(row: dict) -> EpisodeRecord:
+    import json
+
+    row = dict(row)
+    row["policy_params"] = json.loads(row["policy_params"])
+    row["videos"] = dict(row["videos"] or [])
+    return EpisodeRecord.model_validate(row)
+
+
+class ManifestProblem(BaseModel):
+    """One manifest row that does not make an EpisodeRecord: which row, its key (or a stand-in
+    built from the row number when the key cells are bad too), the field and why."""
+
+    row: int
+    key: str
+    field: str
+    detail: str
+    success: bool | None  # the row's success cell when it is a bool (a success is no failure to set aside)
+
+
+def read_episode_rows(path) -> tuple[list[EpisodeRecord], list[ManifestProblem]]:
+    """The stage 1 manifest, row by row: one bad cell sets that row aside instead of failing
+    the whole read. A file that cannot be read at all still raises (pyarrow's error)."""
     import json
 
     import pyarrow.parquet as pq
+    from pydantic import ValidationError
 
-    out = []
-    for row in pq.read_table(path).to_pylist():
-        row["policy_params"] = json.loads(row["policy_params"])
-        row["videos"] = dict(row["videos"] or [])
-        out.append(EpisodeRecord.model_validate(row))
-    return out
+    good, bad = [], []
+    for i, row in enumerate(pq.read_table(path).to_pylist()):
+        try:
+            good.append(_episode_from_row(row))
+            continue
+        except json.JSONDecodeError as e:
+            field, detail = "policy_params", f"not JSON ({e.msg} at char {e.pos})"
+        except ValidationError as e:
+            err = e.errors()[0]
+            field = ".".join(str(p) for p in err["loc"]) or "<row>"
+            detail = "; ".join(f"{'.'.join(str(p) for p in x['loc'])}: {x['msg']}" for x in e.errors())
+        except (TypeError, ValueError) as e:  # e.g. a null map or params cell
+            field, detail = "videos" if "videos" in str(e) else "policy_params", f"{type(e).__name__}: {e}"
+        parts = [row.get(k) for k in ("suite", "task", "episode_id")]
+        ok = all(isinstance(p, str) and p and "/" not in p for p in parts)
+        key = "/".join(parts) if ok else f"unknown_suite/unknown_task/manifest_row_{i}"
+        success = row.get("success") if isinstance(row.get("success"), bool) else None
+        bad.append(ManifestProblem(row=i, key=key, field=field, detail=detail[:500], success=success))
+    return good, bad
 
 
 # Per-step log of one episode. Row t describes the step that applied action t to state t.
@@ -242,6 +287,9 @@ class QuarantineEntry(Record):
     source: str
     reason: str  # no_json | schema | out_of_range | truncated | backend_error | ...
     detail: str = ""
+    # a bad input: the file (run-relative when it lies in the run folder) and the field at fault
+    file: str | None = None
+    field: str | None = None
     raw_text: str | None = None
     model: str | None = None
     prompt_name: str | None = None

@@ -12,6 +12,9 @@ Quirks kept here and nowhere else:
 - the Panda gripper ramps its command (`current_action`) across steps: it is not part of
   the MuJoCo state, so a restored closed gripper needs some close commands to stay closed.
 - robosuite's own horizon/done handling is disabled (`ignore_done`); runners own horizons.
+- `step` runs `FastStepper` (fast_step.py): robosuite's control step without the work whose
+  results nobody reads, bit-identical states and goal checks. `SimEnv(task, fast_step=False)`
+  steps through robosuite's own `env.step` (identity tests, benchmarks).
 - LIBERO re-samples fixture poses (cabinets, stoves, racks; about +-1 cm) at every reset
   from the global `np.random`, and fixture poses are NOT part of the flattened state. So
   every reset here seeds that sampler with `FIXTURE_SEED` (and restores the caller's global
@@ -28,6 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pipeline.sim.fast_step import FastStepper
 from pipeline.sim.libero_setup import ensure_libero_ready
 from pipeline.sim.registry import TaskSpec
 from pipeline.sim.render import CAMERAS, FrameRenderer
@@ -51,7 +55,7 @@ def _quiet():
 class SimEnv:
     """A built LIBERO environment for one task. Not thread-safe; one per worker process."""
 
-    def __init__(self, task: TaskSpec, control_hz: int = CONTROL_HZ):
+    def __init__(self, task: TaskSpec, control_hz: int = CONTROL_HZ, fast_step: bool = True):
         ensure_libero_ready()
         with _quiet():
             from libero.libero.envs.env_wrapper import ControlEnv
@@ -69,6 +73,8 @@ class SimEnv:
             self._seeded_reset()
         self.task = task
         self.env = self._wrapper.env  # the robosuite/LIBERO domain object
+        self._stepper = FastStepper(self.env)
+        self.fast_step = fast_step  # False: robosuite's own env.step (same states, slower)
         self._renderers: dict[tuple[int, str], FrameRenderer] = {}
         self._owner = self._body_owners()
 
@@ -124,6 +130,8 @@ class SimEnv:
         action = np.asarray(action, dtype=np.float64)
         if action.shape != (ACTION_DIM,):
             raise ValueError(f"action must have shape ({ACTION_DIM},), got {action.shape}")
+        if self.fast_step:
+            return self._stepper.step(action)
         _, _, done, _ = self.env.step(action)
         return bool(done)
 
@@ -132,7 +140,7 @@ class SimEnv:
         a = np.zeros(ACTION_DIM)
         a[-1] = gripper
         for _ in range(steps):
-            self.env.step(a)
+            self.step(a)
 
     def reanchor_controller(self) -> None:
         """Make the arm controller's goal the current end-effector pose.

@@ -11,8 +11,10 @@ beside the VLM's (`simstate_time_s`) for the agreement report.
 The scene pair is written at the first settled step at or after the onset (see
 `phases.settled_step`); the history is the window before the onset.
 Quarantine reasons from here: no_failure_found (simstate saw no event; carries the idle
-fallback step), not_settled (objects never calm again), goal_satisfied_at_onset, bddl_*, state_shape, stage1_* (bad inputs), and a
-VLM parse/backend reason (truncated, no_json, schema, out_of_range, backend_error, ...).
+fallback step), not_settled (objects never calm again), goal_satisfied_at_onset, bddl_*,
+state_shape, stage1_* (bad inputs: a missing, truncated or inconsistent file, named with the
+field in `file` / `field`), and a VLM parse/backend reason (truncated, no_json, schema,
+out_of_range, backend_error, ...).
 """
 
 from __future__ import annotations
@@ -51,6 +53,16 @@ def _quarantine(paths: Stage2Paths, rec: EpisodeRecord, entry: QuarantineEntry) 
     return Outcome(key=rec.key, status="quarantine", reason=entry.reason, source=entry.source)
 
 
+def run_relative(file: str | None, run: Path) -> str | None:
+    """A file as reviewers see it: relative to the run folder when it lies inside."""
+    if file is None:
+        return None
+    try:
+        return Path(file).resolve().relative_to(Path(run).resolve()).as_posix()
+    except ValueError:
+        return file
+
+
 def process_episode(env, rec: EpisodeRecord, stage1: Path, paths: Stage2Paths, cfg: Stage2Config,
                     vlm: dict | None = None) -> Outcome:
     """`vlm`: None for simstate, else {"source", "model", "prompt_name", "prompt_hash", "raw_text",
@@ -59,7 +71,8 @@ def process_episode(env, rec: EpisodeRecord, stage1: Path, paths: Stage2Paths, c
         ep = load_episode(stage1, rec)
     except EpisodeError as e:
         return _quarantine(paths, rec, QuarantineEntry(key=rec.key, stage="stage2", source="stage2",
-                                                       reason=e.reason, detail=e.detail))
+                                                       reason=e.reason, detail=e.detail,
+                                                       file=run_relative(e.file, stage1.parent), field=e.field))
     actions = ep.steps["action"]
     grip = actions[:, 6] if len(actions) else np.zeros(0)
     ev = compute_evidence(env, ep.states, grip, rec.control_hz)

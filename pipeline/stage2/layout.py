@@ -1,5 +1,6 @@
 """Where stage 2 reads stage 1's episodes and writes its own files (paths only, no IO
-except `load_episode`). The folder layout is documented in pipeline/stage2/run.py."""
+except `load_episode`, which checks every input it reads, and `fingerprint`, which stats
+them). The folder layout is documented in pipeline/stage2/run.py."""
 
 from __future__ import annotations
 
@@ -30,6 +31,10 @@ class Stage2Paths:
     def quarantine(self, rec: EpisodeRecord) -> Path:
         return self._rel("quarantine", rec, ".json")
 
+    def quarantine_for_key(self, key: str) -> Path:
+        """A manifest row with no usable record still has a key (see records.read_episode_rows)."""
+        return Path("quarantine") / f"{key}.json"
+
     def vlm(self, rec: EpisodeRecord) -> Path:
         return self._rel("vlm", rec, ".json")
 
@@ -55,21 +60,85 @@ class Stage1Episode:
         return self.folder / name if name else None
 
 
+def _bad(reason: str, path: Path, field: str, what: str) -> EpisodeError:
+    return EpisodeError(reason, f"{path}: field {field}: {what}", file=str(path), field=field)
+
+
+def _read_states(path: Path, rec: EpisodeRecord) -> np.ndarray:
+    try:  # a truncated .npy raises ValueError (short data) or EOFError/OSError (short header)
+        states = np.load(path, allow_pickle=False)
+    except (ValueError, EOFError, OSError) as e:
+        raise _bad("stage1_bad_states", path, "states", f"unreadable ({type(e).__name__}: {e})") from None
+    if states.ndim != 2 or states.shape != (rec.steps + 1, rec.state_dim):
+        raise _bad("stage1_bad_states", path, "states",
+                   f"shape {states.shape}, manifest says ({rec.steps + 1}, {rec.state_dim})")
+    if not np.issubdtype(states.dtype, np.floating) or not np.isfinite(states).all():
+        raise _bad("stage1_bad_states", path, "states", f"dtype {states.dtype} or non-finite values")
+    return states
+
+
+_STEP_WIDTHS = {"step": None, "action": 7, "eef_pos": 3, "eef_quat": 4, "gripper_qpos": 2}
+
+
+def _read_steps(path: Path, rec: EpisodeRecord) -> dict[str, np.ndarray]:
+    try:
+        table = pq.read_table(path)
+    except (pa.ArrowException, OSError) as e:  # truncated: "Parquet magic bytes not found" etc.
+        raise _bad("stage1_bad_steps", path, "<file>", f"unreadable ({type(e).__name__}: {e})") from None
+    cols = {}
+    for name, width in _STEP_WIDTHS.items():
+        if name not in table.column_names:
+            raise _bad("stage1_bad_steps", path, name, "column missing")
+        values = table.column(name).to_pylist()
+        try:  # a null or short cell makes a ragged / object array: refuse it here, not deep in the sim
+            arr = np.asarray(values, dtype=np.float64 if width else np.int64)
+        except (TypeError, ValueError) as e:
+            raise _bad("stage1_bad_steps", path, name, f"bad cell ({e})") from None
+        if (width and arr.shape != (len(values), width)) or not np.isfinite(arr).all():
+            raise _bad("stage1_bad_steps", path, name, f"shape {arr.shape} or non-finite values")
+        cols[name] = arr
+    if len(cols["step"]) != rec.steps:
+        raise _bad("stage1_bad_steps", path, "step", f"{len(cols['step'])} rows, manifest says {rec.steps}")
+    return cols
+
+
 def load_episode(stage1: Path, rec: EpisodeRecord) -> Stage1Episode:
-    """Read an episode's logs; a missing or inconsistent file is an EpisodeError naming it."""
+    """Read an episode's logs; a missing, truncated or inconsistent file is an EpisodeError naming
+    the file and the field."""
     folder = Path(stage1) / rec.path
     states_path, steps_path = folder / "states.npy", folder / "steps.parquet"
     for p in (states_path, steps_path):
         if not p.exists():
-            raise EpisodeError("stage1_missing_file", str(p))
-    states = np.load(states_path)
-    if states.ndim != 2 or states.shape != (rec.steps + 1, rec.state_dim):
-        raise EpisodeError("stage1_bad_states",
-                           f"{states_path}: shape {states.shape}, manifest says ({rec.steps + 1}, {rec.state_dim})")
-    table = pq.read_table(steps_path)
-    cols = {c: np.asarray(table.column(c).to_pylist()) for c in ("step", "action", "eef_pos", "eef_quat", "gripper_qpos")}
-    if len(cols["step"]) != rec.steps:
-        raise EpisodeError("stage1_bad_steps", f"{steps_path}: {len(cols['step'])} rows, manifest says {rec.steps}")
+            raise _bad("stage1_missing_file", p, "<file>", "no such file")
+    states = _read_states(states_path, rec)
+    cols = _read_steps(steps_path, rec)
     frames_path = folder / "frames.parquet"
-    frames = pq.read_table(frames_path) if frames_path.exists() else None
+    try:
+        frames = pq.read_table(frames_path) if frames_path.exists() else None
+    except (pa.ArrowException, OSError) as e:
+        raise _bad("stage1_bad_frames", frames_path, "<file>", f"unreadable ({type(e).__name__}: {e})") from None
+    if frames is not None and not {"frame", "step", "time_s"} <= set(frames.column_names):
+        raise _bad("stage1_bad_frames", frames_path, "<file>", f"columns {frames.column_names}")
     return Stage1Episode(record=rec, folder=folder, states=states, steps=cols, frames=frames)
+
+
+def input_files(stage1: Path, rec: EpisodeRecord) -> list[Path]:
+    """The stage-1 files an episode's stage-2 outcome is computed from."""
+    folder = Path(stage1) / rec.path
+    return [folder / n for n in ("states.npy", "steps.parquet", "frames.parquet", *sorted(rec.videos.values()))]
+
+
+def fingerprint(stage1: Path, rec: EpisodeRecord) -> dict[str, str]:
+    """What an outcome was computed from: size + mtime of each input file and a hash of the
+    manifest row. Recorded in the done marker; when it changes (a fixed file, a corrected
+    row) the episode is done again. Stat, not a content hash: 6,500 episodes rerun in seconds."""
+    import hashlib
+
+    out = {"manifest_row": hashlib.sha256(rec.model_dump_json().encode()).hexdigest()[:16]}
+    for p in input_files(stage1, rec):
+        try:
+            st = p.stat()
+            out[p.name] = f"{st.st_size}:{st.st_mtime_ns}"
+        except OSError:
+            out[p.name] = "missing"
+    return out

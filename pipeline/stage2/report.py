@@ -6,7 +6,9 @@ Outputs (rewritten from those files on every run, so they always match them):
     agreement.json + agreement.png   when a VLM ran beside simstate: MAE and shares within
                                      +-0.5 s / +-1 s of |vlm - simstate| (pipeline.vlm.agreement),
                                      and a histogram of the signed differences
-    summary.json                     counts: scenes, quarantined by reason, by onset event kind
+    summary.json                     counts: scenes, quarantined by reason, by onset event kind;
+                                     set_aside + input_faults: episodes quarantined for a bad
+                                     input (key, reason, file, field) or an unexpected error
 """
 
 from __future__ import annotations
@@ -79,6 +81,10 @@ def write_reports(stage2: Path) -> dict:
         "scenes": len(locs),
         "quarantined": len(quar),
         "quarantine_reasons": dict(Counter(q.reason for q in quar)),
+        # set aside for a bad input (a stage-1 file or manifest cell) or an unexpected error:
+        # the episodes a fix and a rerun can still bring back
+        "set_aside": len(faults := [q for q in quar if q.file or q.reason == "episode_error"]),
+        "input_faults": [{"key": q.key, "reason": q.reason, "file": q.file, "field": q.field} for q in faults],
         "onset_kinds": dict(Counter(r for r in table.column("onset_kind").to_pylist()) if locs else {}),
         "agreement": write_agreement(stage2, locs),
     }

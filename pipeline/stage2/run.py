@@ -19,13 +19,19 @@ Output layout, under `<run.output_dir>/stage2/`:
     localizations.parquet                              all Localizations, compiled
     agreement.json, agreement.png                      VLM vs simstate (when a VLM ran)
     summary.json
-    _done/<suite>__<task>__<episode_id>.done           completion markers, written last
+    _done/<suite>__<task>__<episode_id>.done           completion markers, written last; they record
+                                                       the inputs' fingerprint (see pending.py)
 
 Flow: (1) with a VLM backend, ask it about every pending episode (vlm_step, main process,
 `max_in_flight` concurrent requests); (2) the executor runs one unit per task (the env is
 built once per task): evidence -> simstate -> onset -> phases -> scene -> history -> record;
-(3) compile the reports. Resumable: episodes with a done marker are skipped; reports are
-rebuilt from the per-episode files every time.
+(3) compile the reports. Resumable: episodes with a done marker are skipped unless their
+inputs changed since (the marker records size + mtime of the stage-1 files and a hash of the
+manifest row), so a fixed file is picked up by the next run; reports are rebuilt from the
+per-episode files every time. Bad input never stops the stage: a manifest row that makes no
+record, or a truncated / inconsistent episode file, becomes a quarantine entry naming the
+file, the field and the reason; the summary counts them (`set_aside`). Only an unreadable
+manifest as a whole is fatal.
 """
 
 from __future__ import annotations
@@ -37,27 +43,14 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from rich.table import Table
 
 from pipeline.config import Config, save_resolved
-from pipeline.errors import FatalError
 from pipeline.executors import make_executor
-from pipeline.records import EpisodeRecord, read_episodes
-from pipeline.stage2.layout import Stage2Paths, unit_id
+from pipeline.records import EpisodeRecord
+from pipeline.stage2.layout import Stage2Paths
+from pipeline.stage2.pending import pending_failures
 from pipeline.stage2.report import write_reports
 from pipeline.stage2.worker import TaskUnit, process_task
 
 console = Console()
-
-
-def pending_failures(cfg: Config, paths: Stage2Paths) -> tuple[list[EpisodeRecord], int, int]:
-    """(failed episodes not yet done, failed total, successes skipped)."""
-    from pipeline.atomic import Completions
-
-    manifest = cfg.out / "stage1" / "episodes.parquet"
-    if not manifest.exists():
-        raise FatalError(f"{manifest}: no stage 1 manifest; run `recover stage1` first")
-    episodes = read_episodes(manifest)
-    failed = [e for e in episodes if not e.success]
-    done = Completions(paths.root).done_ids()
-    return [e for e in failed if unit_id(e) not in done], len(failed), len(episodes) - len(failed)
 
 
 def task_units(cfg: Config, episodes: list[EpisodeRecord]) -> list[TaskUnit]:
@@ -98,6 +91,11 @@ def run(cfg: Config) -> dict:
             make_executor(cfg.executor).run(process_task, units, on_event=on_event)
     summary = write_reports(paths.root)
     _print_summary(summary, n_failed)
+    if summary["set_aside"]:
+        console.print(f"[yellow]stage 2: {summary['set_aside']} set aside for bad input[/yellow] "
+                      "(quarantined with file, field and reason; fix the file and rerun to retry):")
+        for q in summary["input_faults"][:20]:
+            console.print(f"  {q['key']}: {q['reason']} {q['file']} field {q['field']}")
     return summary
 
 

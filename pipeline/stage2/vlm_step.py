@@ -49,6 +49,7 @@ def _stored(result, rec: EpisodeRecord, frames) -> dict:
 def run_vlm(cfg: Config, episodes: list[EpisodeRecord], paths: Stage2Paths,
             on_result: Callable[[], None] | None = None) -> int:
     """Localize every episode without a stored VLM result; return how many were asked."""
+    import pyarrow as pa
     import pyarrow.parquet as pq
 
     from pipeline.vlm.backends import VLMRequest, make_backend
@@ -70,7 +71,12 @@ def run_vlm(cfg: Config, episodes: list[EpisodeRecord], paths: Stage2Paths,
                                                            "detail": f"no agentview video in {folder}"})
                     continue
                 fp = folder / "frames.parquet"
-                frames[rec.key] = pq.read_table(fp) if fp.exists() else None
+                try:
+                    frames[rec.key] = pq.read_table(fp) if fp.exists() else None
+                except (pa.ArrowException, OSError) as e:  # truncated: the episode worker sets it aside
+                    write_json(paths.abs(paths.vlm(rec)), {"source": backend.name, "reason": "stage1_bad_frames",
+                                                           "detail": f"{fp}: unreadable ({e})"})
+                    continue
                 requests.append(VLMRequest(task="localize", video=Path(folder / video), instruction=rec.instruction,
                                            frames_table=frames[rec.key], key=rec.key))
                 batch.append(rec)

@@ -3,7 +3,10 @@
 Input: a `TaskUnit` (picklable). The worker builds the task's environment once (through a
 per-process `EnvCache`), runs `process_episode` for each episode not yet done, marks each
 done after its outputs exist, and emits one progress event per episode. A per-episode
-EpisodeError has already become a quarantine entry; anything else stops the run.
+EpisodeError has already become a quarantine entry; any other error of one episode (not a
+FatalError) becomes an `episode_error` entry too, and the unit goes on with the next episode.
+The done marker records the inputs' fingerprint (layout.fingerprint): a changed input is done
+again. An `episode_error` gets no marker, so the next run tries it again.
 """
 
 from __future__ import annotations
@@ -12,9 +15,10 @@ import json
 from dataclasses import dataclass
 from pathlib import Path
 
-from pipeline.atomic import Completions
+from pipeline.atomic import Completions, write_json
 from pipeline.config import Stage2Config
-from pipeline.records import EpisodeRecord
+from pipeline.errors import FatalError
+from pipeline.records import EpisodeRecord, QuarantineEntry
 
 _CACHE = None  # per worker process: the last task's environment
 
@@ -37,9 +41,19 @@ def _env_for(suite: str, task: str):
     return _CACHE.get(get_task(suite, task))
 
 
+def _set_aside(paths, rec: EpisodeRecord, e: Exception):
+    from pipeline.stage2.episode import Outcome
+
+    paths.abs(paths.localization(rec)).unlink(missing_ok=True)
+    entry = QuarantineEntry(key=rec.key, stage="stage2", source="stage2", reason="episode_error",
+                            detail=f"{type(e).__name__}: {e}"[:2000])
+    write_json(paths.abs(paths.quarantine(rec)), entry.model_dump(mode="json"))
+    return Outcome(key=rec.key, status="quarantine", reason=entry.reason)
+
+
 def process_task(unit: TaskUnit, emit) -> list[dict]:
     from pipeline.stage2.episode import process_episode
-    from pipeline.stage2.layout import Stage2Paths, unit_id
+    from pipeline.stage2.layout import Stage2Paths, fingerprint, unit_id
 
     run = Path(unit.run_dir)
     cfg = Stage2Config.model_validate_json(unit.stage2_cfg)
@@ -53,8 +67,14 @@ def process_task(unit: TaskUnit, emit) -> list[dict]:
         vlm = json.loads(vlm_file.read_text()) if cfg.vlm.backend != "simstate" and vlm_file.exists() else None
         if cfg.vlm.backend != "simstate" and vlm is None:
             vlm = {"source": cfg.vlm.backend, "reason": "backend_error", "detail": "no stored VLM result"}
-        out = process_episode(env, rec, run / "stage1", paths, cfg, vlm)
-        done.mark_done(unit_id(rec), {"status": out.status, "reason": out.reason})
+        inputs = fingerprint(run / "stage1", rec)  # before reading: a file changed meanwhile is redone
+        try:
+            out = process_episode(env, rec, run / "stage1", paths, cfg, vlm)
+            done.mark_done(unit_id(rec), {"status": out.status, "reason": out.reason, "inputs": inputs})
+        except FatalError:
+            raise
+        except Exception as e:  # one episode's surprise must not cost the task's other episodes
+            out = _set_aside(paths, rec, e)
         row = out.__dict__.copy()
         results.append(row)
         emit({"episode": rec.key, **row})

@@ -6,14 +6,17 @@ Inputs (run folder):
   stage2/evidence/<suite>/<task>/<episode_id>.parquet      EVIDENCE_SCHEMA
   stage1/episodes/<suite>/<task>/<episode_id>/video_<camera>.mp4, frames.parquet
 Outputs: `Unit`s, one per episode key: a localization, or the quarantine entry of an episode
-with no localization. A file that does not parse becomes a quarantined unit itself
-(reason `unreadable`, naming the file and the field), so nothing is silently dropped.
+with no localization. A localization stage 3 cannot use as it is becomes a quarantined unit
+itself (a stage-3 QuarantineEntry naming the file, the field and the reason, one of
+`INPUT_FAULTS`): a file that does not parse, a key that is not its suite/task/episode_id, a
+fail_time_s that is NaN, negative or past the episode's end, a key another file claims too. Nothing is silently dropped.
 Paths in the context are relative to the run folder (the server serves nothing else).
 """
 
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -23,51 +26,161 @@ from pipeline.records import Localization, QuarantineEntry
 from pipeline.sim.render import CAMERAS
 
 
+# reasons of the units `collect` sets aside itself: a stage-2 file it cannot use as it is
+INPUT_FAULTS = ("unreadable", "key_mismatch", "duplicate_key", "fail_time_not_finite", "fail_time_negative",
+                "fail_time_beyond_episode")
+
+
 @dataclass
 class Unit:
     key: str
     localization: Localization | None = None
     quarantine: QuarantineEntry | None = None
+    source: Path | None = None  # the stage-2 file this unit was read from
+    instruction: str | None = None  # kept when a localization is set aside
 
     @property
     def unit_id(self) -> str:
         return self.key.replace("/", "__")
 
 
-def _problem(path: Path, e: Exception) -> str:
+def fingerprint(run_dir: Path, unit: Unit) -> str:
+    """What a unit's stage-3 outcome is computed from: the bytes of its stage-2 file and the
+    size + mtime of its evidence. The done marker records it; a corrected file is read again."""
+    import hashlib
+
+    h = hashlib.sha256()
+    for path in (unit.source,) if unit.source else ():
+        try:
+            h.update(path.read_bytes())
+        except OSError:
+            h.update(b"missing")
+    suite, task, ep = unit.key.split("/", 2)
+    ev = run_dir / "stage2" / "evidence" / suite / task / f"{ep}.parquet"
+    if ev.is_file():
+        st = ev.stat()
+        h.update(f"{st.st_size}:{st.st_mtime_ns}".encode())
+    return h.hexdigest()[:16]
+
+
+def _problem(path: Path, e: Exception) -> tuple[str, str | None]:
+    """(detail naming the file and every bad field, the first bad field)."""
     if isinstance(e, ValidationError):  # every problem, not only the first
-        return f"{path}: " + "; ".join(
-            f"field {'.'.join(str(p) for p in err['loc']) or '<root>'}: {err['msg']}" for err in e.errors())
-    return f"{path}: {e}"
+        fields = [".".join(str(p) for p in err["loc"]) or "<root>" for err in e.errors()]
+        return f"{path}: " + "; ".join(f"field {f}: {err['msg']}" for f, err in zip(fields, e.errors())), fields[0]
+    return f"{path}: {e}", None
 
 
 def _key_from_path(root: Path, path: Path) -> str:
-    rel = path.relative_to(root).with_suffix("")
-    return "/".join(rel.parts[-3:]) if len(rel.parts) >= 3 else rel.as_posix()
+    """suite/task/episode_id from a file's place (padded, so every key has three parts)."""
+    parts = path.relative_to(root).with_suffix("").parts[-3:]
+    return "/".join(("unknown_suite", "unknown_task")[: 3 - len(parts)] + parts)
+
+
+def _rel(run_dir: Path, path: Path) -> str:
+    return path.relative_to(run_dir).as_posix()
+
+
+def _lengths(run_dir: Path) -> dict[str, float]:
+    """Latest valid onset time by key, from the stage-1 manifest (rows that read): the last
+    state's time plus one video frame, since a VLM sees a video of total_frames / fps seconds
+    (pipeline.vlm.video_input) and may answer up to its end."""
+    manifest = run_dir / "stage1" / "episodes.parquet"
+    if not manifest.is_file():
+        return {}
+    from pipeline.records import read_episode_rows
+
+    try:
+        records, _ = read_episode_rows(manifest)
+    except Exception:  # stage 2 reports an unreadable manifest; here it only bounds times
+        return {}
+    return {r.key: r.steps / r.control_hz + (1 / r.video_fps if r.video_fps else 0.0) for r in records}
+
+
+def _time_fault(loc: Localization, length: float | None) -> tuple[str, str] | None:
+    t = loc.fail_time_s
+    if not math.isfinite(t):
+        return "fail_time_not_finite", f"{t} is not a time"
+    if t < 0:
+        return "fail_time_negative", f"{t} s is before the episode starts"
+    if length is not None and t > length + 1e-6:
+        return "fail_time_beyond_episode", f"{t} s is after the episode's end ({length:g} s)"
+    return None
 
 
 def collect(run_dir: Path) -> list[Unit]:
-    """Every stage-2 outcome as a unit, localizations first choice, sorted by key."""
+    """Every stage-2 outcome as a unit, localizations first choice, sorted by key.
+
+    A localization is set aside (a stage-3 QuarantineEntry naming file, field and reason,
+    queued as a quarantined item) when its file does not parse, its fail_time_s is not a time
+    inside the episode, or its key is claimed by another file too: the file stored under that
+    key keeps it, every other claimant is set aside under the key its own path names."""
     s2 = run_dir / "stage2"
     units: dict[str, Unit] = {}
     loc_root, q_root = s2 / "localizations", s2 / "quarantine"
+    claims: dict[str, list[tuple[Path, Localization]]] = {}
+
+    def set_aside(path: Path, reason: str, detail: str, field: str | None, loc: Localization | None = None) -> None:
+        key = _key_from_path(loc_root, path)
+        trace = {k: getattr(loc, k) for k in ("model", "prompt_name", "prompt_hash", "raw_text")} if loc else {}
+        q = QuarantineEntry(key=key, stage="stage3", source=loc.source if loc else "stage2", reason=reason,
+                            detail=detail, file=_rel(run_dir, path), field=field, **trace)
+        units.setdefault(key, Unit(key, quarantine=q, source=path, instruction=loc.instruction if loc else None))
+
     for path in sorted(loc_root.rglob("*.json")) if loc_root.exists() else []:
         try:
             loc = Localization.model_validate_json(path.read_text())
-            units[loc.key] = Unit(loc.key, localization=loc)
         except (ValidationError, ValueError, OSError) as e:
-            key = _key_from_path(loc_root, path)
-            units.setdefault(key, Unit(key, quarantine=QuarantineEntry(
-                key=key, stage="stage3", source="stage2", reason="unreadable", detail=_problem(path, e))))
+            set_aside(path, "unreadable", *_problem(path, e))
+            continue
+        if loc.key != f"{loc.suite}/{loc.task}/{loc.episode_id}":  # every later step splits the key
+            set_aside(path, "key_mismatch", f"{path}: field key: {loc.key!r} is not "
+                      f"suite/task/episode_id ({loc.suite}/{loc.task}/{loc.episode_id})", "key", loc)
+            continue
+        claims.setdefault(loc.key, []).append((path, loc))
+    lengths = _lengths(run_dir)
+    for key, claimants in claims.items():
+        owners = {p for p, _ in claimants if len(claimants) == 1 or _key_from_path(loc_root, p) == key}
+        for path, loc in claimants:
+            if path not in owners:
+                others = ", ".join(_rel(run_dir, p) for p, _ in claimants if p != path)
+                set_aside(path, "duplicate_key", f"{path}: field key: {key} is also the key of {others}", "key", loc)
+                continue
+            fault = _time_fault(loc, lengths.get(key) or _duration_of(run_dir, key))
+            if fault:
+                set_aside(path, fault[0], f"{path}: field fail_time_s: {fault[1]}", "fail_time_s", loc)
+            else:
+                units[key] = Unit(key, localization=loc, source=path)
     for path in sorted(q_root.rglob("*.json")) if q_root.exists() else []:
         try:
             q = QuarantineEntry.model_validate(json.loads(path.read_text()))
         except (ValidationError, ValueError, OSError) as e:
             key = _key_from_path(q_root, path)
-            q = QuarantineEntry(key=key, stage="stage3", source="stage2", reason="unreadable", detail=_problem(path, e))
+            detail, field = _problem(path, e)
+            q = QuarantineEntry(key=key, stage="stage3", source="stage2", reason="unreadable", detail=detail,
+                                file=_rel(run_dir, path), field=field)
+        if len(q.key.split("/")) != 3:
+            q = q.model_copy(update={"key": _key_from_path(q_root, path)})
         if q.key not in units:
-            units[q.key] = Unit(q.key, quarantine=q)
+            units[q.key] = Unit(q.key, quarantine=q, source=path)
     return [units[k] for k in sorted(units)]
+
+
+def _duration_of(run_dir: Path, key: str) -> float | None:
+    """The latest valid onset time from the frame table (last frame + one frame) or the
+    evidence (last step), when the manifest has no row; None when neither reads."""
+    import pyarrow.parquet as pq
+
+    suite, task, ep = key.split("/", 2)
+    frames = run_dir / "stage1" / "episodes" / suite / task / ep / "frames.parquet"
+    try:
+        times = sorted(pq.read_table(frames, columns=["time_s"]).column("time_s").to_pylist())
+        if times:
+            return times[-1] + (times[-1] - times[-2] if len(times) > 1 else 0.0)
+    except Exception:  # missing or unreadable: try the evidence
+        pass
+    ev = Path("stage2") / "evidence" / suite / task / f"{ep}.parquet"
+    return _duration(run_dir, None, ev.as_posix() if (run_dir / ev).is_file() else None)
 
 
 def _video_fps(path: Path) -> float | None:

@@ -11,8 +11,14 @@ Invariants: every stage-2 outcome enters the queue: a quarantined stage-2 output
 characterization that failed, becomes an item marked quarantined (people supply the
 values); rerunning skips finished episodes, and enqueueing is idempotent, so a crash
 between the queue write and the done-marker loses and duplicates nothing. Done-markers name
-the characterizer (backend, model, prompt version): a new one characterizes again, and a
-changed proposal enters the queue as a new revision (final records stay untouched).
+the characterizer (backend, model, prompt version) and record the unit's inputs (a hash of
+its stage-2 file, its evidence's size + mtime): a new characterizer or a corrected input
+characterizes again, and a changed proposal enters the queue as a new revision (final
+records stay untouched). A stage-2 file stage 3 cannot use (see `inputs.collect`: NaN,
+negative or too late fail_time_s, a repeated key, no parse) is set aside as a stage-3
+QuarantineEntry naming file, field and reason and queued as a quarantined item; the summary
+counts them (`set_aside`) and prints "N set aside". The exit status stays 0: set-aside
+episodes are per-episode outcomes (pipeline.errors.EpisodeError), visible in the summary.
 """
 
 from __future__ import annotations
@@ -30,7 +36,7 @@ from pipeline.review.db import write_session
 from pipeline.review.enqueue import enqueue
 from pipeline.review.server import engine_for
 from pipeline.stage3.characterizers import make_characterizer
-from pipeline.stage3.inputs import Unit, collect, context
+from pipeline.stage3.inputs import INPUT_FAULTS, Unit, collect, context, fingerprint
 
 BATCH = 16
 
@@ -66,7 +72,8 @@ def run(cfg: Config) -> dict:
     units = collect(run_dir)
     done = Completions(s3)
     sig = _signature(cfg)
-    todo = [u for u in units if not done.is_done(f"{u.unit_id}__{sig}")]
+    inputs = {u.key: fingerprint(run_dir, u) for u in units}
+    todo = [u for u in units if not _is_done(done, f"{u.unit_id}__{sig}", inputs[u.key])]
     engine = engine_for(cfg)
     counts: Counter = Counter(skipped=len(units) - len(todo))
     console = Console()
@@ -85,15 +92,30 @@ def run(cfg: Config) -> dict:
                 for unit in batch:
                     outcome = next(outcomes) if unit.localization is not None else unit.quarantine
                     counts[_store(run_dir, cfg, engine, unit, outcome, hz, fps)] += 1
-                    done.mark_done(f"{unit.unit_id}__{sig}", {"key": unit.key, "characterizer": _describe(cfg)})
+                    done.mark_done(f"{unit.unit_id}__{sig}", {"key": unit.key, "characterizer": _describe(cfg),
+                                                              "inputs": inputs[unit.key]})
                     bar.advance(task)
     finally:
         if characterize is not None and hasattr(characterize, "close"):
             characterize.close()
-    summary = {"episodes": len(units), **counts}
+    faults = [u.quarantine for u in units if u.quarantine and u.quarantine.stage == "stage3"
+              and u.quarantine.reason in INPUT_FAULTS]
+    summary = {"episodes": len(units), **counts, "set_aside": len(faults),
+               "input_faults": [{"key": q.key, "reason": q.reason, "file": q.file, "field": q.field} for q in faults]}
     write_json(s3 / "summary.json", summary)
-    console.print(f"stage 3: {summary}")
+    console.print(f"stage 3: { {k: v for k, v in summary.items() if k != 'input_faults'} }")
+    if faults:  # queued as quarantined items (people supply the values), never as proposals
+        console.print(f"[yellow]stage 3: {len(faults)} set aside[/yellow] for bad stage-2 input "
+                      "(queued as quarantined items; fix the file and rerun to queue its values):")
+        for q in faults[:20]:
+            console.print(f"  {q.key}: {q.reason} {q.file} field {q.field}")
     return summary
+
+
+def _is_done(done: Completions, marker: str, inputs: str) -> bool:
+    """Done with these inputs: a marker from before input fingerprints existed counts as done."""
+    info = done.info(marker)
+    return info is not None and info.get("inputs", inputs) == inputs
 
 
 def _describe(cfg: Config) -> str:
@@ -126,7 +148,8 @@ def _store(run_dir: Path, cfg: Config, engine, unit: Unit, outcome, hz: int, fps
         char_file.unlink(missing_ok=True)
     with write_session(engine) as s:
         enqueue(
-            s, key=unit.key, instruction=unit.localization.instruction if unit.localization else _instruction(run_dir, unit),
+            s, key=unit.key, instruction=(unit.localization.instruction if unit.localization else
+                                          unit.instruction or _instruction(run_dir, unit)),
             proposal=proposal_for(unit, ch, q), context=context(run_dir, unit, hz, fps),
             required_reviews=cfg.stage3.reviews_per_item, quarantined=q is not None,
             reason=f"{q.stage}:{q.reason}" if q else None, detail=q.detail if q else None,
@@ -143,7 +166,11 @@ def _instruction(run_dir: Path, unit: Unit) -> str:
         import pyarrow.parquet as pq
 
         suite, task, ep = unit.key.split("/", 2)
-        for row in pq.read_table(manifest, columns=["suite", "task", "episode_id", "instruction"]).to_pylist():
-            if (row["suite"], row["task"], row["episode_id"]) == (suite, task, ep):
+        try:
+            rows = pq.read_table(manifest, columns=["suite", "task", "episode_id", "instruction"]).to_pylist()
+        except Exception:  # an unreadable manifest is stage 2's to report; the key still names the task
+            rows = []
+        for row in rows:
+            if (row["suite"], row["task"], row["episode_id"]) == (suite, task, ep) and row["instruction"]:
                 return row["instruction"]
     return unit.key.split("/")[1].replace("_", " ")
