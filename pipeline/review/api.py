@@ -13,18 +13,19 @@ Invariants: every route but login and the page needs a user (the OpenAPI docs to
 only with `docs=True`); an item's reviews (adjudication, history) stay hidden while they are
 being collected, and whoever has read them can no longer review that episode; writes
 through the cookie need the CSRF header; errors are `{"detail", "field"?, "current"?}` with 401/403/404/409/422;
-a request body that fails the schema is a 422 whose `field` names the bad field.
+a request body that fails the schema is a 422 whose `field` names the bad field, and no
+error repeats a secret (a token field, a whole body, a long value); sign-in takes JSON only
+(415 otherwise, before the body is read). Decisions and queue/next write through
+`fastwrite` (short under the SQLite writer lock).
 """
 
 from __future__ import annotations
 
-import os
 from contextlib import asynccontextmanager
 from pathlib import Path
 from typing import Literal
 
 import anyio
-
 from fastapi import Depends, FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, JSONResponse, Response
@@ -41,8 +42,10 @@ from pipeline.review.errors import Forbidden, NotFound, ReviewError
 from pipeline.review.workflow import QueueSettings
 
 UI_DIR = Path(__file__).resolve().parents[2] / "review_ui"
-REQUEST_THREADS = int(os.environ.get("REVIEW_THREADS", "4"))
-WRITE_THREADS = int(os.environ.get("REVIEW_WRITE_THREADS", "4"))
+# request threads per server process, for page loads and for the two writes of every item;
+# measured with benchmarks/review_load.py (2, 8 and 16 were no better than 4 on 2 cores)
+REQUEST_THREADS = 4
+WRITE_THREADS = 4
 
 
 class FieldsIn(BaseModel):
@@ -138,7 +141,7 @@ class SecurityHeaders:
 def create_app(run_dir: str | Path, engine: Engine, settings: QueueSettings, ui_dir: Path = UI_DIR,
                docs: bool = False) -> FastAPI:
     run_dir = Path(run_dir).resolve()
-    # FastAPI's own docs routes answer anyone; ours (below, with docs=True) need a user
+
     @asynccontextmanager
     async def lifespan(_app):
         # few request threads per process: with dozens runnable, the one holding the SQLite
@@ -150,13 +153,14 @@ def create_app(run_dir: str | Path, engine: Engine, settings: QueueSettings, ui_
     limiters: dict = {}
 
     def writers() -> anyio.CapacityLimiter:
-        # the two writes of every item (queue/next, decision) get threads of their own: they
-        # never wait for a thread behind page loads, and more than two would only queue on
-        # the SQLite writer lock (made lazily: a limiter belongs to the running event loop)
+        # the two writes of every item (queue/next, decision) get threads of their own, so a
+        # decision never waits for a thread behind page loads (made lazily: a limiter
+        # belongs to the running event loop)
         if "w" not in limiters:
             limiters["w"] = anyio.CapacityLimiter(WRITE_THREADS)
         return limiters["w"]
 
+    # FastAPI's own docs routes answer anyone; ours (below, with docs=True) need a user
     app = FastAPI(title="libero-recover review", docs_url=None, redoc_url=None, openapi_url=None, lifespan=lifespan)
     app.add_exception_handler(RequestValidationError, _validation_error)
     app.add_exception_handler(ReviewError, lambda _r, e: JSONResponse(status_code=e.status, content=e.body()))
