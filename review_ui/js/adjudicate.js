@@ -3,9 +3,8 @@
 import { api, ApiError, newKey } from "./api.js";
 import { h } from "./dom.js";
 import { FieldControls, FIELD_LABELS, FIELDS, showValue } from "./fields.js";
-import { episodeHeader, itemKeys, playerAndTracks, versionLine } from "./item_common.js";
-
-const REVIEWER_COLORS = ["#7c3aed", "#0891b2", "#db2777", "#65a30d"];
+import { dashCss, reviewerMarker } from "./colors.js";
+import { episodeHeader, itemKeys, playerAndTracks, playheadTime, versionLine } from "./item_common.js";
 
 export async function adjudicatePage(root, id, app) {
   let item = await api(`/api/items/${id}/adjudication`);
@@ -19,15 +18,15 @@ export async function adjudicatePage(root, id, app) {
   const decidable = !claimError && (item.status === "conflict" || item.status === "adjudicating");
   const media = await playerAndTracks(item, {
     markers: (values) => [
-      { t: p.fail_time_s, label: "model", short: "model", color: "#ea580c", dash: true },
+      { t: p.fail_time_s, label: "model", short: "model", kind: "model" },
       ...item.reviews.map((r, i) => ({ t: r.values ? r.values.fail_time_s : null, label: r.reviewer, short: r.reviewer,
-        color: REVIEWER_COLORS[i % REVIEWER_COLORS.length] })),
-      { t: values.fail_time_s ?? item.agreed.fail_time_s, label: "your decision", short: "final", color: "#2563eb" },
+        kind: "reviewer", style: reviewerMarker(i) })),
+      { t: values.fail_time_s ?? item.agreed.fail_time_s, label: "your decision", short: "final", kind: "final" },
     ],
   });
   const controls = new FieldControls({
     fields: disputed, values: {}, suggested: p, choices: item.choices, duration: item.media.duration_s,
-    getPlayhead: () => media.player.simTimeOfFrame(media.player.frame()),
+    controlHz: item.media.control_hz || 20, getPlayhead: () => playheadTime(media.player),
     onChange: (values) => media.tracks.setMarkers(media.markers(values)),
   });
 
@@ -36,7 +35,7 @@ export async function adjudicatePage(root, id, app) {
     ? h("button", { type: "button", className: "use", title: "use this value", onclick: () => controls.set(f, v) }, "use") : null;
   const table = h("table", { className: "compare", id: "compare" },
     h("thead", {}, h("tr", {}, h("th", {}, "field"), h("th", {}, "model ", h("span", { className: "pill" }, "suggestion")),
-      ...item.reviews.map((r, i) => h("th", {}, h("i", { className: "dot", style: `background:${REVIEWER_COLORS[i % 4]}` }), r.reviewer,
+      ...item.reviews.map((r, i) => h("th", {}, h("i", { className: "line", style: `background:${dashCss(reviewerMarker(i))}` }), r.reviewer,
         h("span", { className: "muted" }, ` · ${r.decision}`))),
       h("th", {}, "outcome"))),
     h("tbody", {}, ...FIELDS.map((f) => h("tr", { className: disputed.includes(f) ? "disputed" : "agreed", dataset: { field: f } },

@@ -8,9 +8,13 @@ export const FIELD_LABELS = {
   failure_category: "Failure category", recovery_action: "Recovery action",
 };
 
-export function same(field, a, b) {
+// the control step of a time, as the server snaps it (half-way goes to the later step)
+export const snapStep = (t, hz) => Math.floor(t * hz + 0.5 + 1e-9);
+
+// equal as the server compares them: times on the same control step, actions up to spaces
+export function same(field, a, b, hz = 20) {
   if (a == null || b == null) return a == b;
-  if (field === "fail_time_s") return Math.abs(a - b) < 1e-3;
+  if (field === "fail_time_s") return snapStep(Number(a), hz) === snapStep(Number(b), hz);
   if (field === "recovery_action") return a.trim().replace(/\s+/g, " ") === b.trim().replace(/\s+/g, " ");
   return a === b;
 }
@@ -25,8 +29,9 @@ export function showValue(field, v) {
 
 // Controls for a set of fields. `suggested` marks the model's value on each control.
 export class FieldControls {
-  constructor({ fields = FIELDS, values, suggested = {}, choices, onChange, getPlayhead, duration }) {
+  constructor({ fields = FIELDS, values, suggested = {}, choices, onChange, getPlayhead, duration, controlHz = 20 }) {
     this.fields = fields;
+    this.hz = controlHz;
     this.values = { ...values };
     this.suggested = suggested;
     this.onChange = onChange || (() => {});
@@ -69,7 +74,7 @@ export class FieldControls {
   }
 
   setTimeAtPlayhead() {
-    if (this.fields.includes("fail_time_s")) this.set("fail_time_s", Math.round(this.getPlayhead() * 1000) / 1000);
+    if (this.fields.includes("fail_time_s")) this.set("fail_time_s", this.getPlayhead());
   }
 
   set(f, v, sync = true) {
@@ -94,14 +99,18 @@ export class FieldControls {
     this.refreshBadges();
   }
 
+  // "edited" once a value is chosen and differs from the model's: an empty field (nothing
+  // chosen yet, e.g. on the adjudication page) is not an edit
   refreshBadges() {
-    for (const f of this.fields)
-      this.rows[f].row.classList.toggle("edited", !same(f, this.values[f], this.suggested[f]));
+    for (const f of this.fields) {
+      const v = this.values[f];
+      this.rows[f].row.classList.toggle("edited", v != null && v !== "" && !same(f, v, this.suggested[f], this.hz));
+    }
   }
 
   edits() {
     const out = {};
-    for (const f of this.fields) if (!same(f, this.values[f], this.suggested[f]) && this.values[f] != null && this.values[f] !== "") out[f] = this.values[f];
+    for (const f of this.fields) if (!same(f, this.values[f], this.suggested[f], this.hz) && this.values[f] != null && this.values[f] !== "") out[f] = this.values[f];
     return out;
   }
 

@@ -1,6 +1,7 @@
 // The queue page: what I hold, what is open to me, what I decided; conflicts for adjudicators.
 import { api } from "./api.js";
 import { h } from "./dom.js";
+import { progressCard } from "./progress.js";
 
 function table(rows, cols, empty) {
   if (!rows.length) return h("p", { className: "muted empty" }, empty);
@@ -25,6 +26,7 @@ export async function queuePage(root, app) {
           q.conflicts.length ? ` · ${q.conflicts.length} conflicts to adjudicate` : "")),
       start),
   ];
+  if (q.progress) sections.push(progressCard(q.progress));
   if (q.role !== "reviewer") {
     sections.push(h("section", { className: "card", id: "conflicts" }, h("h2", {}, "Conflicts to adjudicate"),
       table(q.conflicts, [
