@@ -54,12 +54,14 @@ export class FieldControls {
     if (f === "recovery_level") {
       return h("div", { className: "choice-grid levels" }, ...choices.recovery_level.map((lv, i) =>
         h("button", { type: "button", className: "choice", dataset: { value: lv }, id: `level-${lv}`,
-          onclick: () => this.set(f, lv) }, h("b", {}, lv), " ", LEVEL_NAMES[lv] || "", " ", h("kbd", {}, String(i + 1)))));
+          title: `${lv} · ${LEVEL_NAMES[lv] || ""}`, onclick: () => this.set(f, lv) },
+        h("span", { className: "choice-text" }, h("b", {}, lv), " ", LEVEL_NAMES[lv] || ""), h("kbd", {}, String(i + 1)))));
     }
     if (f === "failure_category") {
       return h("div", { className: "choice-grid categories" }, ...choices.failure_category.map((c) =>
         h("button", { type: "button", className: "choice", dataset: { value: c }, id: `cat-${c}`,
-          onclick: () => this.set(f, c) }, categoryLabel(c), " ", h("kbd", {}, CATEGORY_KEYS[c] || ""))));
+          title: categoryLabel(c), onclick: () => this.set(f, c) },
+        h("span", { className: "choice-text" }, categoryLabel(c)), h("kbd", {}, CATEGORY_KEYS[c] || ""))));
     }
     if (f === "fail_time_s") {
       this.timeInput = h("input", { type: "number", step: "0.05", min: "0", max: duration != null ? String(duration) : undefined,

@@ -17,7 +17,7 @@ export function versionLine(p) {
   const v = (x) => [x.model || x.source, x.prompt_name ? `${x.prompt_name}${x.prompt_hash ? `@${x.prompt_hash.slice(0, 8)}` : ""}` : null]
     .filter(Boolean).join(" · ") || "—";
   return h("div", { className: "version", id: "model-version" },
-    h("div", {}, h("b", {}, "time by "), v(loc)), h("div", {}, h("b", {}, "labels by "), v(ch)));
+    h("span", {}, h("b", {}, "time by "), v(loc)), " · ", h("span", {}, h("b", {}, "labels by "), v(ch)));
 }
 
 // video + evidence tracks kept on one playhead; `markers(values)` gives the time markers

@@ -222,13 +222,19 @@ export class Tracks {
         g.fillStyle = "#64748b"; g.fillText(`${(this.maxDisp * 100).toFixed(0)} cm`, GUTTER + 3, y + 7);
       }
       if (row.key === "grasp" || row.key === "contacts") {
-        ts.forEach((t, i) => {
-          const on = row.key === "grasp" ? ev.grasped[i] : (ev.contacts[i] || []).filter((p) => !p.includes("table")).length;
-          if (!on) return;
-          const x0 = this.x(t, w), x1 = this.x(ts[Math.min(ts.length - 1, i + 1)], w);
-          g.fillStyle = row.key === "grasp" ? (this.colors[ev.grasped[i]] || FILLS.contacts) : FILLS.contacts;
-          g.fillRect(x0, y + 2, Math.max(1, x1 - x0), row.h - 4);
-        });
+        // one bar per run of equal values (no seams between steps)
+        const val = (i) => row.key === "grasp" ? (ev.grasped[i] || "")
+          : ((ev.contacts[i] || []).some((p) => !p.includes("table")) ? "contact" : "");
+        for (let i = 0; i < ts.length;) {
+          let j = i;
+          while (j + 1 < ts.length && val(j + 1) === val(i)) j++;
+          if (val(i)) {
+            const x0 = this.x(ts[i], w), x1 = this.x(ts[Math.min(ts.length - 1, j + 1)], w);
+            g.fillStyle = row.key === "grasp" ? (this.colors[val(i)] || FILLS.contacts) : FILLS.contacts;
+            g.fillRect(x0, y + 2, Math.max(1, x1 - x0), row.h - 4);
+          }
+          i = j + 1;
+        }
       }
       y += row.h + GAP;
     }
@@ -253,15 +259,18 @@ export class Tracks {
     const i = this.index(this.t), ev = this.ev;
     const contacts = (ev.contacts[i] || []).filter((p) => !p.includes("table"));
     const near = this.events.filter((e) => Math.abs(e.time_s - ev.time_s[i]) < 0.25);
+    // two lines at most (the panel keeps its height as the playhead moves); the whole text
+    // is in the tooltip
     this.readout.replaceChildren(...[
-      h("div", {}, h("b", {}, "t "), `${ev.time_s[i].toFixed(2)} s (step ${ev.step[i]})`),
-      h("div", {}, h("b", {}, "gripper "), `${(ev.gripper_opening[i] * 100).toFixed(1)} cm`),
-      h("div", {}, h("b", {}, "grasped "), ev.grasped[i] || "nothing"),
-      h("div", {}, h("b", {}, "goal "), `${Math.round(ev.goal_progress[i] * 100)} %`),
-      h("div", { className: "wide" }, h("b", {}, "contacts "), contacts.length ? contacts.join(", ") : "none"),
-      h("div", { className: "wide" }, h("b", {}, "displacement "), this.objects.map((o) =>
-        `${o} ${((ev.displacement[o][i] || 0) * 100).toFixed(1)} cm`).join(" · ")),
-      near.length ? h("div", { className: "event-now wide" }, h("b", {}, "event "), near.map((e) =>
-        `${e.kind}${e.object ? ` (${e.object})` : ""}`).join(", ")) : null].filter(Boolean));
+      near.length ? h("span", { className: "event-now" }, h("b", {}, "event "), near.map((e) =>
+        `${e.kind}${e.object ? ` (${e.object})` : ""}`).join(", ")) : null,
+      h("span", {}, h("b", {}, "t "), `${ev.time_s[i].toFixed(2)} s (step ${ev.step[i]})`),
+      h("span", {}, h("b", {}, "gripper "), `${(ev.gripper_opening[i] * 100).toFixed(1)} cm`),
+      h("span", {}, h("b", {}, "grasped "), ev.grasped[i] || "nothing"),
+      h("span", {}, h("b", {}, "goal "), `${Math.round(ev.goal_progress[i] * 100)} %`),
+      h("span", {}, h("b", {}, "contacts "), contacts.length ? contacts.join(", ") : "none"),
+      h("span", {}, h("b", {}, "displacement "), this.objects.map((o) =>
+        `${o} ${((ev.displacement[o][i] || 0) * 100).toFixed(1)} cm`).join(" · "))].filter(Boolean));
+    this.readout.title = this.readout.innerText;
   }
 }
