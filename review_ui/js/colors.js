@@ -26,6 +26,12 @@ export const PHASE_COLORS = { pre: "#eef2f6", during: "#fde7dd", post: "#e8ecf6"
 
 // a CSS background drawing a marker's line style (legend swatches and label edges)
 export function dashCss(m) {
-  return m.dash.length ? `repeating-linear-gradient(90deg, ${m.color} 0 ${m.dash[0]}px, transparent ${m.dash[0]}px ${m.dash[0] + m.dash[1]}px)`
-    : m.color;
+  if (!m.dash.length) return m.color;
+  let at = 0;
+  const stops = m.dash.map((len, i) => {
+    const c = i % 2 ? "transparent" : m.color, stop = `${c} ${at}px ${at + len}px`;
+    at += len;
+    return stop;
+  });
+  return `repeating-linear-gradient(90deg, ${stops.join(", ")})`;
 }

@@ -20,8 +20,9 @@ export function versionLine(p) {
     h("span", {}, h("b", {}, "time by "), v(loc)), " · ", h("span", {}, h("b", {}, "labels by "), v(ch)));
 }
 
-// video + evidence tracks kept on one playhead; `markers(values)` gives the time markers
-export async function playerAndTracks(item, { markers }) {
+// video + evidence tracks kept on one playhead; `markers(values)` gives the time markers,
+// first for the `initial` values of the fields
+export async function playerAndTracks(item, { markers, initial }) {
   const [frames, evidence] = await Promise.all([
     item.media.has_frames ? api(`/api/items/${item.id}/frames`) : null,
     item.media.has_evidence ? api(`/api/items/${item.id}/evidence`) : null,
@@ -32,7 +33,7 @@ export async function playerAndTracks(item, { markers }) {
     onTick: (pl) => { if (tracks) tracks.setPlayhead(pl.time()); },
   });
   tracks = new Tracks({
-    evidence, media: item.media, markers: markers({ ...item.proposal, ...(item.my_review?.values || {}) }),
+    evidence, media: item.media, markers: markers(initial),
     onSeek: (t) => player.seekGrid(t),
   });
   const el = h("div", { className: "media" }, player.el, tracks.el);

@@ -148,7 +148,7 @@ export class Player {
     };
     v.addEventListener("play", () => { this.playBtn.firstChild.textContent = "❚❚ Pause "; this.el.classList.add("playing"); loop(); });
     v.addEventListener("pause", () => { this.playBtn.firstChild.textContent = "▶ Play "; this.el.classList.remove("playing"); this._tick(); });
-    v.addEventListener("ended", () => this.pause());
+    v.addEventListener("ended", () => this.seekTime(this.end));
     for (const ev of ["loadedmetadata", "seeked"]) v.addEventListener(ev, () => this._tick());
     v.addEventListener("error", () => { this.readout.textContent = "the video could not be loaded"; this.readout.classList.add("error"); });
   }

@@ -21,6 +21,7 @@ export async function reviewPage(root, id, app) {
   const incomplete = FIELDS.some((f) => p[f] == null);  // nothing complete to accept: revise instead
 
   const media = await playerAndTracks(item, {
+    initial: start,
     markers: (values) => [
       { t: p.fail_time_s, label: "model's failure time", short: "model", kind: "model" },
       { t: values.fail_time_s, label: "your failure time", short: "you", kind: "you" },
@@ -42,10 +43,11 @@ export async function reviewPage(root, id, app) {
   const btn = (id, cls, label, key, fn) => h("button", { type: "button", id, className: cls, onclick: fn }, label, " ", h("kbd", {}, key));
   const buttons = h("div", { className: "decision-buttons" },
     btn("btn-accept", "primary", "Accept", "A", () => submit("accept")),
-    btn("btn-revise", "secondary", "Submit revision", "S", () => submit("revise")),
+    btn("btn-revise", "secondary", "Revise", "S", () => submit("revise")),
     btn("btn-flag", "warn-outline", "Flag", "F", () => openFlag()),
     btn("btn-next", "ghost", "Next", "N", () => app.next()));
   buttons.querySelector("#btn-accept").title = "accept the model's suggestion";
+  buttons.querySelector("#btn-revise").title = "submit your revision (the fields marked edited)";
   buttons.querySelector("#btn-flag").title = "flag as ambiguous (a reason is required)";
   // which buttons work: none while saving; only Next on a closed item; no Accept without a
   // complete suggestion (a quarantined item: the reviewer sets every field and submits)

@@ -147,10 +147,13 @@ def test_review_and_adjudicate_in_the_browser(browser, server, engine, people, i
     adj.click(f"#adjudicate-{second}")
     adj.wait_for_selector("#compare")
     assert adj.locator(".field.edited").count() == 0  # nothing chosen yet: nothing edited
+    shots = os.environ.get("REVIEW_SCREENSHOTS")  # a folder: keep pictures of the pages for people
+    if shots:
+        adj.wait_for_function("[...document.querySelectorAll('video')].every((v) => v.readyState >= 2)")
+        adj.screenshot(path=f"{shots}/adjudication_1366x768.png")
     table = adj.text_content("#compare")
     assert "ann" in table and "bob" in table and "disputed" in table
     assert adj.locator("#compare tr.disputed").count() == 2  # time (0.8 vs 1.6 s) and level
-    shots = os.environ.get("REVIEW_SCREENSHOTS")  # a folder: keep pictures of the pages for people
     adj.keyboard.press("4")
     assert adj.locator(".field.edited").count() == 1
     adj.fill("#input-fail-time", "1.3")
@@ -164,7 +167,7 @@ def test_review_and_adjudicate_in_the_browser(browser, server, engine, people, i
     adj.wait_for_selector("#history ol.events li")
     assert "enqueued" in adj.text_content("#history") and "claimed" in adj.text_content("#history")
     if shots:
-        adj.screenshot(path=f"{shots}/adjudication_1366x768.png")
+        adj.screenshot(path=f"{shots}/adjudication_decided_1366x768.png")
     adj.keyboard.press("s")
     adj.wait_for_selector("#adjudication-status.saved")
     with read_session(engine) as s:
