@@ -3,6 +3,7 @@
 import { h } from "./dom.js";
 
 const pct = (x) => `${Math.round(x * 100)} %`;
+const SHORT = { fail_time_s: "time", recovery_level: "level", failure_category: "category", recovery_action: "action" };
 
 export function agreementText(a) {
   if (!a || !a.closed_items) return "agreement: once your items close";
@@ -19,14 +20,14 @@ export function progressLine(el, p) {
     : "your agreement with the other reviewers shows once items you reviewed have closed";
 }
 
-// the card on the queue page
-export function progressCard(p) {
+// the counts on the queue page
+export function progressCounts(p) {
   const a = p.agreement || {};
   const count = (n, label, id) => h("div", { className: "count", id }, h("b", {}, String(n)), label);
-  return h("section", { className: "card", id: "my-progress" }, h("h2", {}, "Your progress"),
-    h("div", { className: "counts" },
-      count(p.done_today, "done today", "progress-today"),
-      count(p.left, "left in the queue", "progress-left"),
-      count(a.closed_items ? pct(a.all_fields) : "—", a.closed_items ? `agreement (${a.closed_items} closed)` : "agreement (none closed yet)", "progress-agreement"),
-      ...(a.closed_items ? Object.entries(a.by_field).map(([f, x]) => count(x == null ? "—" : pct(x), f.replaceAll("_", " "))) : [])));
+  return h("div", { className: "counts", id: "my-progress" },
+    count(p.done_today, "done today", "progress-today"),
+    count(p.left, "left in the queue", "progress-left"),
+    count(a.closed_items ? pct(a.all_fields) : "—", a.closed_items ? `agreement (${a.closed_items} closed)` : "agreement (none closed yet)", "progress-agreement"),
+    a.closed_items ? h("div", { className: "count per-field", id: "progress-by-field" }, h("span", { className: "muted" }, "per field"),
+      ...Object.entries(a.by_field).map(([f, x]) => h("span", {}, `${SHORT[f] || f} `, h("b", {}, x == null ? "—" : pct(x))))) : null);
 }

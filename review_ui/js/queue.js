@@ -1,7 +1,7 @@
 // The queue page: what I hold, what is open to me, what I decided; conflicts for adjudicators.
 import { api } from "./api.js";
 import { h } from "./dom.js";
-import { progressCard } from "./progress.js";
+import { progressCounts } from "./progress.js";
 
 function table(rows, cols, empty) {
   if (!rows.length) return h("p", { className: "muted empty" }, empty);
@@ -23,10 +23,10 @@ export async function queuePage(root, app) {
     h("section", { className: "card hero" },
       h("div", {}, h("h1", {}, `Hello ${q.user}`),
         h("p", { className: "muted" }, `${q.held.length} held by you · ${q.available_total} open to you · ${q.reviewed.length} decided by you`,
-          q.conflicts.length ? ` · ${q.conflicts.length} conflicts to adjudicate` : "")),
+          q.conflicts.length ? ` · ${q.conflicts.length} conflicts to adjudicate` : ""),
+        q.progress ? progressCounts(q.progress) : null),
       start),
   ];
-  if (q.progress) sections.push(progressCard(q.progress));
   if (q.role !== "reviewer") {
     sections.push(h("section", { className: "card", id: "conflicts" }, h("h2", {}, "Conflicts to adjudicate"),
       table(q.conflicts, [

@@ -316,10 +316,15 @@ def test_item_page_fits_steps_on_the_control_grid_and_keeps_its_look(browser, se
     page.wait_for_selector("#decision-status.error")
     assert page.is_disabled("#btn-accept")
 
-    # the queue shows the reviewer's progress
+    # the queue shows the reviewer's progress; agreement once an item has closed
+    r = httpx.post(f"{server.url}/api/items/{first}/review", headers={"Authorization": f"Bearer {people['bob']}"},
+                   json={"decision": "accept", "version": 0, "idempotency_key": "bob-1"})
+    assert r.status_code == 200
     page.keyboard.press("q")
     page.wait_for_selector("#my-progress")
     assert page.text_content("#progress-today").startswith("1")
+    assert page.text_content("#progress-agreement") == "100 %agreement (1 closed)"
+    assert "agreement 100 % over 1 closed item" in page.text_content("#progress")
     if shots:
         page.screenshot(path=f"{shots}/queue_1366x768.png")
 
