@@ -62,7 +62,8 @@ export class Tracks {
 
   style(m) { return { ...(MARKERS[m.kind] || {}), ...(m.style || {}) }; }
   markerLegend() {
-    return this.markers.map((m) => h("span", { className: "marker-key" },
+    // a model marker without a time (quarantined output) has nothing to explain
+    return this.markers.filter((m) => m.t != null || m.kind !== "model").map((m) => h("span", { className: "marker-key" },
       h("i", { className: "line", style: `background:${dashCss(this.style(m))}` }), m.label));
   }
   setMarkers(markers) {

@@ -187,6 +187,9 @@ STILL_CSS = """
 #toast { display: none !important; }
 """
 SIZES = [(1366, 768), (1920, 1080)]
+# every video has its seeked frame decoded (then one more animation frame for the paint)
+VIDEOS_STILL = """() => [...document.querySelectorAll('video')].every((v) => !v.seeking && v.readyState >= 2)
+    && new Promise((done) => requestAnimationFrame(() => requestAnimationFrame(() => done(true))))"""
 
 
 def open_page(browser, server, token: str, size: tuple[int, int], hash_: str):
@@ -292,8 +295,8 @@ def test_item_page_fits_steps_on_the_control_grid_and_keeps_its_look(browser, se
 
     # the look: compared with the stored reference (paused at the model's time, fixed size and font)
     page.keyboard.press("t")
-    page.wait_for_timeout(300)  # the seeked frame painted
-    png = page.screenshot()
+    page.wait_for_function(VIDEOS_STILL)
+    png = page.screenshot(animations="disabled", caret="hide")
     compare_with_reference(png, REFERENCE)
     if shots:
         Path(shots, "item_1366x768.png").write_bytes(png)
@@ -308,6 +311,9 @@ def test_item_page_fits_steps_on_the_control_grid_and_keeps_its_look(browser, se
     page.evaluate(f"location.hash = '#/item/{quarantined}'")
     page.wait_for_selector("#quarantine-banner")
     assert page.is_disabled("#btn-accept")
+    if shots:
+        page.wait_for_function(VIDEOS_STILL)
+        page.screenshot(path=f"{shots}/item_quarantined_1366x768.png")
     page.keyboard.press("s")
     status = page.text_content("#decision-status")
     assert "press A" not in status and "set every field" in status
