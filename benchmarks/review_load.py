@@ -59,18 +59,18 @@ def p(values: list[float], q: float) -> float:
     return values[min(len(values) - 1, int(round(q / 100 * (len(values) - 1))))] * 1000
 
 
-def load(url: str, tokens: list[str], think_s: float = 0.0) -> dict:
+def _reviewers(url: str, tokens: list[tuple[int, str]], think_s: float, barrier, out) -> None:
+    """One client process: a thread per reviewer, each looping until the queue is empty."""
     page_s: list[float] = []
     item_s: list[float] = []
     post_s: list[float] = []
     acked: list[tuple[int, str, dict]] = []
     errors: list[str] = []
     lock = threading.Lock()
-    start = threading.Barrier(len(tokens))
 
     def reviewer(token: str, idx: int) -> None:
         with httpx.Client(base_url=url, headers={"Authorization": f"Bearer {token}"}, timeout=30) as c:
-            start.wait()
+            barrier.wait()
             while True:
                 nxt = c.post("/api/queue/next").json()["item"]
                 if nxt is None:
@@ -97,13 +97,33 @@ def load(url: str, tokens: list[str], think_s: float = 0.0) -> dict:
                     else:
                         errors.append(f"{d.status_code} {d.text[:120]}")
 
-    t = time.perf_counter()
-    threads = [threading.Thread(target=reviewer, args=(tok, i)) for i, tok in enumerate(tokens)]
+    threads = [threading.Thread(target=reviewer, args=(tok, i)) for i, tok in tokens]
     for th in threads:
         th.start()
     for th in threads:
         th.join()
+    out.put({"page_s": page_s, "item_s": item_s, "post_s": post_s, "acked": acked, "errors": errors})
+
+
+def load(url: str, tokens: list[str], think_s: float = 0.0, clients: int = 4) -> dict:
+    """N reviewers spread over `clients` processes (20 people are 20 browsers, not 20 threads
+    sharing one interpreter lock: that lock would add its own waits to every latency)."""
+    import multiprocessing as mp
+
+    ctx = mp.get_context("fork")
+    clients = max(1, min(clients, len(tokens)))
+    barrier, out = ctx.Barrier(len(tokens)), ctx.Queue()
+    groups = [[(i, tok) for i, tok in enumerate(tokens) if i % clients == g] for g in range(clients)]
+    t = time.perf_counter()
+    procs = [ctx.Process(target=_reviewers, args=(url, grp, think_s, barrier, out)) for grp in groups]
+    for pr in procs:
+        pr.start()
+    parts = [out.get(timeout=900) for _ in procs]
+    for pr in procs:
+        pr.join()
     wall = time.perf_counter() - t
+    page_s, item_s, post_s = (sum((x[k] for x in parts), []) for k in ("page_s", "item_s", "post_s"))
+    acked, errors = sum((x["acked"] for x in parts), []), sum((x["errors"] for x in parts), [])
     return {"reviewers": len(tokens), "decisions": len(acked), "refused": len(errors), "errors": errors[:5],
             "wall_s": round(wall, 2), "decisions_per_s": round(len(acked) / wall, 1),
             "item_json_p50_ms": round(p(item_s, 50), 1), "item_json_p95_ms": round(p(item_s, 95), 1),
@@ -126,6 +146,8 @@ def main() -> int:
     ap.add_argument("--reviewers", type=int, default=20)
     ap.add_argument("--items", type=int, default=300, help="items for the N-reviewer run")
     ap.add_argument("--k", type=int, default=2)
+    ap.add_argument("--workers", type=int, default=2, help="server processes (`recover review serve --workers`)")
+    ap.add_argument("--clients", type=int, default=4, help="client processes the reviewers are spread over")
     ap.add_argument("--think-s", type=float, default=0.0,
                     help="pause between loading an item and deciding (0 = a stress test: nobody watches)")
     args = ap.parse_args()
@@ -137,9 +159,12 @@ def main() -> int:
     engine = make_engine(f"sqlite:///{run / 'stage3' / 'review.sqlite'}")
     tokens = [add_user(engine, f"r{i}", "reviewer") for i in range(args.reviewers)]
     port = free_port()
-    server = subprocess.Popen([str(REPO / ".venv" / "bin" / "recover"), "review", "serve", "--config", str(cfg),
-                               "--port", str(port)], cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
-                              env={**os.environ, "PYTHONUNBUFFERED": "1"})
+    # this interpreter and this checkout (the same code as `recover review serve`)
+    server = subprocess.Popen([sys.executable, "-c", "from pipeline.cli import app; app()", "review", "serve",
+                               "--config", str(cfg), "--port", str(port), "--workers", str(args.workers)],
+                              cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                              env={**os.environ, "PYTHONUNBUFFERED": "1",
+                                   "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")])})
     url = f"http://127.0.0.1:{port}"
     try:
         for _ in range(200):
@@ -152,7 +177,7 @@ def main() -> int:
         for n, items in ((1, max(20, args.items // 10)), (args.reviewers, args.items)):
             # a one-reviewer queue holds items with K = 1 so that single person can empty it
             fill(run, engine, items, args.k if n > 1 else 1, tag=f"n{n}-")
-            res = load(url, tokens[:n], args.think_s)
+            res = load(url, tokens[:n], args.think_s, args.clients)
             res.update(check(engine, res.pop("_acked"), args.k))
             results.append(res)
     finally:

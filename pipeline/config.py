@@ -262,6 +262,8 @@ class Stage3Config(_Strict):
     lease_seconds: int = Field(default=900, ge=10)  # an absent reviewer's hold expires
     host: str = "127.0.0.1"  # `recover review serve` (loopback unless you mean otherwise)
     port: int = Field(default=8765, ge=1, le=65535)
+    # server processes; SQLite writes from all of them queue on one lock file (review/db.py)
+    workers: int = Field(default=1, ge=1, le=64)
 
 
 class ReleaseConfig(_Strict):

@@ -18,8 +18,12 @@ a request body that fails the schema is a 422 whose `field` names the bad field.
 
 from __future__ import annotations
 
+import os
+from contextlib import asynccontextmanager
 from pathlib import Path
 from typing import Literal
+
+import anyio
 
 from fastapi import Depends, FastAPI, Request
 from fastapi.exceptions import RequestValidationError
@@ -31,12 +35,13 @@ from sqlalchemy import select
 from sqlalchemy.engine import Engine
 
 from pipeline.records import Category, Level
-from pipeline.review import adjudication, audit, auth, media, views, workflow
+from pipeline.review import adjudication, audit, auth, fastwrite, media, views, workflow
 from pipeline.review.db import COLLECTING, Item, Review, read_session, write_session
 from pipeline.review.errors import Forbidden, NotFound, ReviewError
 from pipeline.review.workflow import QueueSettings
 
 UI_DIR = Path(__file__).resolve().parents[2] / "review_ui"
+REQUEST_THREADS = int(os.environ.get("REVIEW_THREADS", "4"))
 
 
 class FieldsIn(BaseModel):
@@ -105,7 +110,15 @@ def create_app(run_dir: str | Path, engine: Engine, settings: QueueSettings, ui_
                docs: bool = False) -> FastAPI:
     run_dir = Path(run_dir).resolve()
     # FastAPI's own docs routes answer anyone; ours (below, with docs=True) need a user
-    app = FastAPI(title="libero-recover review", docs_url=None, redoc_url=None, openapi_url=None)
+    @asynccontextmanager
+    async def lifespan(_app):
+        # few request threads per process: with dozens runnable, the one holding the SQLite
+        # writer lock waits for the GIL behind the others and every writer queues longer
+        # (requests beyond these wait, without CPU, in the event loop)
+        anyio.to_thread.current_default_thread_limiter().total_tokens = REQUEST_THREADS
+        yield
+
+    app = FastAPI(title="libero-recover review", docs_url=None, redoc_url=None, openapi_url=None, lifespan=lifespan)
     app.add_exception_handler(RequestValidationError, _validation_error)
     app.add_exception_handler(ReviewError, lambda _r, e: JSONResponse(status_code=e.status, content=e.body()))
 
@@ -188,9 +201,7 @@ def create_app(run_dir: str | Path, engine: Engine, settings: QueueSettings, ui_
 
     @app.post("/api/queue/next")
     def next_item(p: auth.Principal = Depends(who)):
-        with write_session(engine) as s:
-            item = workflow.lease_next(s, p.user, settings)
-            return {"item": item.id if item is not None else None}
+        return {"item": fastwrite.next_item(engine, p.user, settings)}
 
     @app.post("/api/items/{item_id}/lease")
     def lease(item_id: int, p: auth.Principal = Depends(who)):
@@ -224,11 +235,7 @@ def create_app(run_dir: str | Path, engine: Engine, settings: QueueSettings, ui_
     @app.post("/api/items/{item_id}/review")
     def review(item_id: int, body: DecisionIn, p: auth.Principal = Depends(who)):
         payload = {**body.model_dump(mode="json", exclude={"fields"}), "fields": _edits(body.fields)}
-        with write_session(engine) as s:
-            r, replayed = workflow.submit_review(s, p.user, item_id, payload, settings)
-            item = workflow.get_item(s, item_id)
-            return {"replayed": replayed, "version": r.version, "decision": r.decision, "values": r.values,
-                    "state": "open" if item.status in ("pending", "leased", "reviewed") else "closed"}
+        return fastwrite.decide(engine, p.user, item_id, payload, settings)
 
     def _reviews_visible(s, p: auth.Principal, item_id: int, whole_episode: bool = False):
         # blindness: nobody reads an item's reviews while they are being collected, nobody

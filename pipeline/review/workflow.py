@@ -139,15 +139,18 @@ _last_sweep: dict[str, float] = {}  # database URL -> time of the last sweep
 SWEEP_EVERY_S = 5.0
 
 
+def sweep_due(s: Session, t: float) -> bool:
+    return t - _last_sweep.get(s.get_bind().url.render_as_string(hide_password=True), 0.0) >= SWEEP_EVERY_S
+
+
 def lease_next(s: Session, user: User, cfg: QueueSettings) -> Item | None:
     """The user's next item: one they already hold, else the fullest open item with room."""
     t = now()
     # every query below already ignores expired leases; the sweep only tidies rows and
     # statuses, so it need not run on every request
-    bind = s.get_bind().url.render_as_string(hide_password=True)
-    if t - _last_sweep.get(bind, 0.0) >= SWEEP_EVERY_S:
+    if sweep_due(s, t):
         expire(s, t)
-        _last_sweep[bind] = t
+        _last_sweep[s.get_bind().url.render_as_string(hide_password=True)] = t
     held = s.scalar(
         select(Item).join(Lease, Lease.item_id == Item.id)
         .where(Lease.user_id == user.id, Lease.expires_at > t, Item.status.in_(COLLECTING), ~_reviewed_by(user.id),
