@@ -10,6 +10,7 @@ export const FIELD_LABELS = {
 
 // the control step of a time, as the server snaps it (half-way goes to the later step)
 export const snapStep = (t, hz) => Math.floor(t * hz + 0.5 + 1e-9);
+export const gridTime = (t, hz) => Math.round(snapStep(t, hz) / hz * 1e6) / 1e6;
 
 // equal as the server compares them: times on the same control step, actions up to spaces
 export function same(field, a, b, hz = 20) {
@@ -65,7 +66,14 @@ export class FieldControls {
     }
     if (f === "fail_time_s") {
       this.timeInput = h("input", { type: "number", step: "0.05", min: "0", max: duration != null ? String(duration) : undefined,
-        id: "input-fail-time", inputMode: "decimal", oninput: () => this.set(f, this.timeInput.value === "" ? null : Number(this.timeInput.value), false) });
+        id: "input-fail-time", inputMode: "decimal", oninput: () => this.set(f, this.timeInput.value === "" ? null : Number(this.timeInput.value), false),
+        // a typed time shows, once left, the control step it will be stored as
+        onchange: () => {
+          if (this.timeInput.value === "") return;
+          const v = gridTime(Number(this.timeInput.value), this.hz);
+          this.timeInput.value = String(v);
+          this.set(f, v, false);
+        } });
       return h("div", { className: "time-row" }, this.timeInput, h("span", { className: "unit" }, "s"),
         h("button", { type: "button", id: "btn-set-time", onclick: () => this.setTimeAtPlayhead() },
           "Set at playhead ", h("kbd", {}, "T")));

@@ -70,7 +70,7 @@ export class Player {
   // the simulator time shown by the video now (continuous while playing)
   videoSimTime() {
     const x = this.main.currentTime * this.fps;
-    if (!this.frames) return this.main.currentTime;
+    if (!this.frames) return Math.max(0, this.main.currentTime - 0.5 / this.fps);  // frame i shows i/fps
     const i = Math.min(this.nFrames - 1, Math.floor(x)), j = Math.min(this.nFrames - 1, i + 1);
     const a = this.frames.time_s[i], b = this.frames.time_s[j];
     return a + (b - a) * Math.min(1, Math.max(0, x - i - 0.5));

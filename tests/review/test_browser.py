@@ -277,6 +277,9 @@ def test_item_page_fits_steps_on_the_control_grid_and_keeps_its_look(browser, se
     assert page.locator("#field-fail_time_s.edited").count() == 1
     page.keyboard.press("Shift+ArrowLeft")
     assert state(page)[:2] == (1.15, 23)
+    page.fill("#input-fail-time", "1.234")  # a typed time shows the control step it is stored as
+    page.keyboard.press("Escape")
+    assert page.input_value("#input-fail-time") == "1.25"
     page.keyboard.press("m")
 
     # events: labelled, stacked where they share a time, the whole list in a tooltip
