@@ -55,7 +55,7 @@ export async function adjudicatePage(root, id, app) {
           " ", h("span", { className: "pill ok" }, "agreed"))))));
 
   const rationale = h("textarea", { id: "rationale", rows: 3, placeholder: "why this outcome (required; kept in the audit log)",
-    oninput: () => rationale.classList.remove("invalid") });
+    oninput: () => { rationale.classList.remove("invalid"); if (status.classList.contains("error")) setStatus("", ""); } });
   const exclude = h("input", { type: "checkbox", id: "exclude" });
   const status = h("div", { className: "decision-status", id: "adjudication-status" });
   const setStatus = (kind, text, extra) => { status.className = `decision-status ${kind}`; status.replaceChildren(h("span", {}, text), extra || ""); };

@@ -285,15 +285,19 @@ def test_item_page_fits_steps_on_the_control_grid_and_keeps_its_look(browser, se
     # events: labelled, stacked where they share a time, the whole list in a tooltip
     stacks = page.locator(".ev-stack")
     assert stacks.count() == 2 and stacks.first.get_attribute("data-n") == "3"
-    assert stacks.first.locator(".ev-label").all_text_contents() == ["toppled · black bowl", "dropped · plate", "contact started · cookie box"]
+    assert stacks.first.locator(".ev-label").all_text_contents() == [
+        "toppled · black bowl", "dropped · plate", "contact started · cookie box"]
     stacks.first.hover()
     tip = page.text_content("#ev-tip")
     assert "object toppled" in tip and "plate_1" in tip and "cookie_box_1" in tip
     page.mouse.move(0, 0)
     # colours: object lines chromatic, time markers achromatic, so never confused
-    objects = [rgb(c) for c in page.eval_on_selector_all(".obj-key i", "(els) => els.map((e) => getComputedStyle(e).backgroundColor)")]
-    markers = [rgb(c) for c in page.eval_on_selector_all(".mtag", "(els) => els.map((e) => getComputedStyle(e).color)")]
-    assert len(objects) == 3 and all(max(c) - min(c) > 80 for c in objects)
+    def colours(selector: str, prop: str) -> list[tuple[int, ...]]:
+        return [rgb(c) for c in page.eval_on_selector_all(selector, f"(els) => els.map((e) => getComputedStyle(e).{prop})")]
+
+    objects, markers = colours(".obj-key i", "backgroundColor"), colours(".mtag", "color")
+    event = colours(".ev-stack", "borderLeftColor")[0]
+    assert len(objects) == 3 and all(max(c) - min(c) > 80 for c in objects) and event not in objects
     assert len(markers) == 2 and all(max(c) - min(c) < 40 for c in markers)
 
     # the look: compared with the stored reference (paused at the model's time, fixed size and font)
