@@ -173,8 +173,9 @@ export class Tracks {
     if (!this.ev) return;
     const c = this.canvas, dpr = window.devicePixelRatio || 1;
     const w = this.area.clientWidth || 600, H = ROWS.reduce((a, r) => a + r.h + GAP, GAP);
-    this._drawMarkerLane(w);
-    this._drawEventLane(w);
+    // the label lanes are DOM: rebuilt when the width or the markers change, not per frame
+    const lanes = `${w}|${this.markers.map((m) => m.t).join(",")}`;
+    if (lanes !== this._lanes) { this._lanes = lanes; this._drawMarkerLane(w); this._drawEventLane(w); }
     c.style.height = `${H}px`;
     if (c.width !== Math.round(w * dpr) || c.height !== Math.round(H * dpr)) { c.width = Math.round(w * dpr); c.height = Math.round(H * dpr); }
     const g = c.getContext("2d");
