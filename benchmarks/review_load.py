@@ -52,6 +52,25 @@ def fill(run: Path, engine, n_items: int, k: int, tag: str) -> None:
                     context=context(run, u, 20, 10.0), required_reviews=k)
 
 
+def cpu_s(pid: int) -> float:
+    """CPU seconds (user + system) used so far by process `pid` and its live children (the
+    server's worker processes): a figure that other work on the machine barely changes."""
+    tick = os.sysconf("SC_CLK_TCK")
+    total = 0.0
+    pids = [pid]
+    try:
+        pids += [int(c) for c in Path(f"/proc/{pid}/task/{pid}/children").read_text().split()]
+    except OSError:
+        pass
+    for q in pids:
+        try:
+            fields = Path(f"/proc/{q}/stat").read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        total += (int(fields[11]) + int(fields[12])) / tick
+    return total
+
+
 def p(values: list[float], q: float) -> float:
     if not values:
         return float("nan")
@@ -177,7 +196,9 @@ def main() -> int:
         for n, items in ((1, max(20, args.items // 10)), (args.reviewers, args.items)):
             # a one-reviewer queue holds items with K = 1 so that single person can empty it
             fill(run, engine, items, args.k if n > 1 else 1, tag=f"n{n}-")
+            cpu0 = cpu_s(server.pid)
             res = load(url, tokens[:n], args.think_s, args.clients)
+            res["server_cpu_ms_per_item"] = round((cpu_s(server.pid) - cpu0) * 1000 / max(1, res["decisions"]), 1)
             res.update(check(engine, res.pop("_acked"), args.k))
             results.append(res)
     finally:
@@ -185,7 +206,8 @@ def main() -> int:
         server.wait(timeout=10)
     one, many = results
     cols = ["reviewers", "decisions", "decisions_per_s", "item_json_p95_ms", "item_page_p50_ms", "item_page_p95_ms",
-            "decision_p50_ms", "decision_p95_ms", "refused", "lost_decisions", "items_over_k"]
+            "decision_p50_ms", "decision_p95_ms", "server_cpu_ms_per_item", "refused", "lost_decisions",
+            "items_over_k"]
     print(f"{'metric':<20}{'1 reviewer':>14}{f'{args.reviewers} reviewers':>16}{'ratio':>9}")
     for c in cols:
         a, b = one[c], many[c]

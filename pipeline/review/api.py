@@ -42,6 +42,7 @@ from pipeline.review.workflow import QueueSettings
 
 UI_DIR = Path(__file__).resolve().parents[2] / "review_ui"
 REQUEST_THREADS = int(os.environ.get("REVIEW_THREADS", "4"))
+WRITE_THREADS = int(os.environ.get("REVIEW_WRITE_THREADS", "4"))
 
 
 class FieldsIn(BaseModel):
@@ -106,6 +107,34 @@ def _validation_error(_req: Request, exc: RequestValidationError) -> JSONRespons
     return JSONResponse(status_code=422, content={"detail": first["msg"], "field": first["field"], "errors": errors})
 
 
+_HEADERS = [
+    (b"x-content-type-options", b"nosniff"),
+    (b"referrer-policy", b"same-origin"),
+    (b"content-security-policy", b"default-src 'self'; img-src 'self' data:; style-src 'self' 'unsafe-inline'; "
+                                 b"frame-ancestors 'none'; form-action 'self'"),
+]
+
+
+class SecurityHeaders:
+    """Adds the security headers to every response (a plain ASGI middleware: Starlette's
+    `@app.middleware("http")` costs a task group and a stream per request)."""
+
+    def __init__(self, app):
+        self.app = app
+
+    async def __call__(self, scope, receive, send):
+        if scope["type"] != "http":
+            return await self.app(scope, receive, send)
+
+        async def send_with_headers(message):
+            if message["type"] == "http.response.start":
+                names = {k.lower() for k, _ in message.get("headers", [])}
+                message["headers"] = list(message.get("headers", [])) + [h for h in _HEADERS if h[0] not in names]
+            await send(message)
+
+        await self.app(scope, receive, send_with_headers)
+
+
 def create_app(run_dir: str | Path, engine: Engine, settings: QueueSettings, ui_dir: Path = UI_DIR,
                docs: bool = False) -> FastAPI:
     run_dir = Path(run_dir).resolve()
@@ -118,26 +147,31 @@ def create_app(run_dir: str | Path, engine: Engine, settings: QueueSettings, ui_
         anyio.to_thread.current_default_thread_limiter().total_tokens = REQUEST_THREADS
         yield
 
+    limiters: dict = {}
+
+    def writers() -> anyio.CapacityLimiter:
+        # the two writes of every item (queue/next, decision) get threads of their own: they
+        # never wait for a thread behind page loads, and more than two would only queue on
+        # the SQLite writer lock (made lazily: a limiter belongs to the running event loop)
+        if "w" not in limiters:
+            limiters["w"] = anyio.CapacityLimiter(WRITE_THREADS)
+        return limiters["w"]
+
     app = FastAPI(title="libero-recover review", docs_url=None, redoc_url=None, openapi_url=None, lifespan=lifespan)
     app.add_exception_handler(RequestValidationError, _validation_error)
     app.add_exception_handler(ReviewError, lambda _r, e: JSONResponse(status_code=e.status, content=e.body()))
 
-    @app.middleware("http")
-    async def security_headers(request: Request, call_next):
-        resp = await call_next(request)
-        resp.headers.setdefault("X-Content-Type-Options", "nosniff")
-        resp.headers.setdefault("Referrer-Policy", "same-origin")
-        resp.headers.setdefault("Content-Security-Policy", "default-src 'self'; img-src 'self' data:; "
-                                "style-src 'self' 'unsafe-inline'; frame-ancestors 'none'; form-action 'self'")
-        return resp
+    app.add_middleware(SecurityHeaders)
 
-    def who(request: Request) -> auth.Principal:
+    async def who(request: Request) -> auth.Principal:
+        # in the event loop, not a worker thread: a sub-millisecond indexed read (WAL readers
+        # never wait for writers) costs less than the hop to a thread and back
         header = request.headers.get("authorization", "")
         bearer = header[7:].strip() if header.lower().startswith("bearer ") else None
         return auth.authenticate(engine, request.method, bearer, request.cookies.get(auth.COOKIE),
                                  request.headers.get(auth.CSRF_HEADER))
 
-    def adjudicator(p: auth.Principal = Depends(who)) -> auth.Principal:
+    async def adjudicator(p: auth.Principal = Depends(who)) -> auth.Principal:
         auth.require_role(p.user, "adjudicator")
         return p
 
@@ -200,8 +234,9 @@ def create_app(run_dir: str | Path, engine: Engine, settings: QueueSettings, ui_
             return JSONResponse(views.progress(s, p.user, settings.time_tolerance_s, settings.control_hz))
 
     @app.post("/api/queue/next")
-    def next_item(p: auth.Principal = Depends(who)):
-        return {"item": fastwrite.next_item(engine, p.user, settings)}
+    async def next_item(p: auth.Principal = Depends(who)):
+        item = await anyio.to_thread.run_sync(fastwrite.next_item, engine, p.user, settings, limiter=writers())
+        return JSONResponse({"item": item})
 
     @app.post("/api/items/{item_id}/lease")
     def lease(item_id: int, p: auth.Principal = Depends(who)):
@@ -233,9 +268,11 @@ def create_app(run_dir: str | Path, engine: Engine, settings: QueueSettings, ui_
         return _table(item_id, "frames")
 
     @app.post("/api/items/{item_id}/review")
-    def review(item_id: int, body: DecisionIn, p: auth.Principal = Depends(who)):
+    async def review(item_id: int, body: DecisionIn, p: auth.Principal = Depends(who)):
         payload = {**body.model_dump(mode="json", exclude={"fields"}), "fields": _edits(body.fields)}
-        return fastwrite.decide(engine, p.user, item_id, payload, settings)
+        out = await anyio.to_thread.run_sync(fastwrite.decide, engine, p.user, item_id, payload, settings,
+                                             limiter=writers())
+        return JSONResponse(out)
 
     def _reviews_visible(s, p: auth.Principal, item_id: int, whole_episode: bool = False):
         # blindness: nobody reads an item's reviews while they are being collected, nobody

@@ -257,7 +257,6 @@ class _WriterLock:
             self.thread.release()
 
 
-_TIMING = os.environ.get("REVIEW_TIMING")
 _WRITE_LOCKS: dict[tuple[int, str], _WriterLock] = {}
 _WRITE_LOCKS_GUARD = threading.Lock()
 
@@ -280,10 +279,8 @@ def write_session(engine: Engine) -> Iterator[Session]:
     """One write transaction (BEGIN IMMEDIATE): committed on success, rolled back on any
     exception; on SQLite taken under the file's writer lock (`_WriterLock`)."""
     lock = _writer_lock(engine)
-    t0 = time.perf_counter()
     if lock is not None:
         lock.__enter__()
-    t1 = time.perf_counter()
     try:
         with Session(engine.execution_options(write=True), expire_on_commit=False) as s:
             with s.begin():
@@ -291,10 +288,6 @@ def write_session(engine: Engine) -> Iterator[Session]:
     finally:
         if lock is not None:
             lock.__exit__(None, None, None)
-        if _TIMING:
-            import inspect
-            with open(_TIMING, "a") as f:
-                f.write(f"{os.getpid()} {(t1-t0)*1000:.2f} {(time.perf_counter()-t1)*1000:.2f} {inspect.stack()[2].function}\n")
 
 
 def ping(engine: Engine) -> None:

@@ -64,6 +64,16 @@ _HOLD = (
     .returning(I.c.id)
 )
 _ADD_LEASE = insert(L)
+# the queue's order (workflow.lease_next): fullest first, quarantined last; prebuilt, since
+# building this statement anew cost more than running it
+_HELD = (select(L.c.id).join(I, I.c.id == L.c.item_id)
+         .where(L.c.user_id == _uid, L.c.expires_at > _t, I.c.status.in_(COLLECTING)).limit(1))
+_all_leases = (select(func.count()).select_from(L).where(L.c.item_id == I.c.id, L.c.expires_at > _t)
+               .scalar_subquery())
+_CANDIDATES = (select(I.c.id, I.c.key, I.c.proposal)
+               .where(I.c.status.in_(COLLECTING), I.c.n_reviews + _all_leases < I.c.required_reviews, _not_mine,
+                      _not_read)
+               .order_by(I.c.quarantined, I.c.n_reviews.desc(), I.c.id).limit(bindparam("n")))
 
 
 def _event(s, actor: str, kind: str, item, before: dict | None, after: dict | None) -> None:
@@ -130,14 +140,9 @@ def next_item(engine: Engine, user: User, cfg: workflow.QueueSettings, candidate
     """Lease the user's next item (as workflow.lease_next); the search runs before the lock."""
     t = now()
     with read_session(engine) as s:
-        held = s.scalar(select(Lease.id).join(Item, Item.id == Lease.item_id)
-                        .where(Lease.user_id == user.id, Lease.expires_at > t, Item.status.in_(COLLECTING)).limit(1))
-        leases = (select(func.count(Lease.id)).where(Lease.item_id == Item.id, Lease.expires_at > t)
-                  .scalar_subquery())
-        rows = [] if held is not None else s.execute(
-            select(Item.id, Item.key, Item.proposal).where(Item.status.in_(COLLECTING), Item.n_reviews + leases < Item.required_reviews,
-                                  ~workflow._reviewed_by(user.id), ~workflow._read_reviews_of(user))
-            .order_by(Item.quarantined, Item.n_reviews.desc(), Item.id).limit(candidates)).all()
+        params = {"uid": user.id, "t": t, "uname": user.name, "n": candidates}
+        held = s.execute(_HELD, params).first()
+        rows = [] if held is not None else s.execute(_CANDIDATES, params).all()
     with write_session(engine) as s:
         if rows and not workflow.sweep_due(s, t):
             for row in rows:
