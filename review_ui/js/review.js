@@ -120,7 +120,7 @@ export async function reviewPage(root, id, app) {
     h("h3", {}, "Model suggestion ", h("span", { className: "pill" }, "suggestion")),
     versionLine(p),
     FIELDS.every((f) => p[f] == null) ? h("p", { className: "muted small" }, "No values proposed.") :
-    h("dl", {}, ...FIELDS.flatMap((f) => [h("dt", {}, FIELD_LABELS[f]), h("dd", { dataset: { field: f } }, showValue(f, p[f]),
+    h("dl", {}, ...FIELDS.flatMap((f) => [h("dt", {}, FIELD_LABELS[f]), h("dd", { dataset: { field: f }, title: f === "recovery_action" ? p[f] || "" : undefined }, showValue(f, p[f]),
       f === "fail_time_s" && p.fail_time_s != null ? h("button", { type: "button", className: "ghost jump", id: "btn-jump-suggested",
         onclick: () => media.player.seekTime(p.fail_time_s) }, "jump ", h("kbd", {}, "M")) : null)])));
 

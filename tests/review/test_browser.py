@@ -186,7 +186,7 @@ STILL_CSS = """
     caret-color: transparent !important; }
 #toast { display: none !important; }
 """
-SIZES = [(1366, 768), (1920, 1080)]
+SIZES = [(1366, 768), (1920, 1080), (1366, 657)]  # the last: a 1366x768 screen less the browser's bars
 # every video has its seeked frame decoded (then one more animation frame for the paint)
 VIDEOS_STILL = """() => [...document.querySelectorAll('video')].every((v) => !v.seeking && v.readyState >= 2)
     && new Promise((done) => requestAnimationFrame(() => requestAnimationFrame(() => done(true))))"""
@@ -349,9 +349,12 @@ def test_item_page_fits_steps_on_the_control_grid_and_keeps_its_look(browser, se
     if shots:
         page.screenshot(path=f"{shots}/queue_1366x768.png")
 
-    # a desktop screen: the same panel and tracks in view
-    big, big_errors = open_page(browser, server, people["bob"], SIZES[1], f"#/item/{items[1]}")
-    assert out_of_view(big, tracks) == [] and big.evaluate("document.scrollingElement.scrollHeight <= innerHeight")
-    if shots:
-        big.screenshot(path=f"{shots}/item_1920x1080.png")
-    assert errors == [] and big_errors == []
+    # a desktop screen, and a 1366x768 laptop screen less the browser's bars: the same in view
+    for size in SIZES[1:]:
+        other, other_errors = open_page(browser, server, people["bob"], size, f"#/item/{items[1]}")
+        assert out_of_view(other, tracks) == [] and other.evaluate("document.scrollingElement.scrollHeight <= innerHeight")
+        if shots:
+            other.screenshot(path=f"{shots}/item_{size[0]}x{size[1]}.png")
+        assert other_errors == []
+        other.context.close()
+    assert errors == []
