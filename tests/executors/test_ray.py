@@ -16,6 +16,10 @@ from ray.cluster_utils import Cluster  # noqa: E402
 
 HERE = Path(__file__).parent
 # ray workers do not inherit sys.path: point them at this folder (work_fns) and the repo
+# One xdist worker runs them all, one after another: a simulated cluster alive in one worker
+# would otherwise be joined by another worker's `ray.init()`, which looks for a local cluster.
+pytestmark = pytest.mark.xdist_group("ray")
+
 WORKER_ENV = {"PYTHONPATH": f"{HERE}:{HERE.parents[1]}"}
 
 
