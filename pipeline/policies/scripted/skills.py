@@ -142,7 +142,7 @@ def place(ctx: Ctx, obj: str, target: str) -> Plan:
     if s.holding_any() != obj:
         ctx.events.append(f"dropped:{obj}")
         if ctx.truth is not None:
-            ctx.end(ctx.truth.left_hand(obj), "out of the hand before lowering")
+            ctx.truth.end_hand(obj, False)
         return
     t = ctx.noise.timing()
     ctx.note(release_timing=t)
@@ -164,10 +164,11 @@ def pick_place(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:
             yield from grasp(ctx, obj, destination(ctx, obj, target))
             if s.holding_any() != obj:
                 ctx.events.append(f"missed_grasp:{obj}")
-                ctx.end("missed_grasp")
+                if ctx.truth is not None:  # held for a while, then gone: a lost grasp, not a miss
+                    ctx.truth.end_hand(obj, False)
                 continue
         yield from place(ctx, obj, target)
         if ctx.truth is not None:  # a no-op when place already ended the attempt
-            ctx.end(ctx.truth.judge_place(obj, s.satisfied(conjunct)))
+            ctx.truth.end_hand(obj, s.satisfied(conjunct))
         if not s.satisfied(conjunct) and s.holding_any() != obj:
             ctx.events.append(f"misplaced:{obj}")

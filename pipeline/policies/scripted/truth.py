@@ -9,20 +9,25 @@ privileged state). Output: `table()`, a `TRUTH_SCHEMA` table written by stage 1 
 Per attempt: the skill and its objects, the steps it spanned, the noise actually applied,
 and the outcome the expert judges from privileged state (`Outcome`), plus the step and
 kind of its decisive event:
-- missed_grasp: the fingers closed and the target is not in hand; event `close`, the first
-  gripper-close command after the descent began.
-- lost_grasp: the target left the hand while the gripper was still commanded closed;
-  event `slip`, the first state without it in hand.
-- dropped: the target left the hand because the gripper opened before the release point
-  (an early opening in transport or while lowering); event `release`, that open command.
-- misplaced: released at the planned height but the conjunct does not hold; event
-  `release`, the first open command after lowering began.
+A hold is a run of >= HELD_ROWS states with the target in hand (touched by both fingers,
+or by one while lifted >= LIFT_HELD_M) that lasts into the lift after the close; shorter
+runs, or a pinch lost before the lift, are fingers brushing it.
+- missed_grasp: no hold in the attempt; event `close`, the first gripper-close command
+  after the descent began (the gripper closing off target).
+- lost_grasp: the hold ended while the gripper was still commanded closed; event `slip`,
+  the first state without the target in hand.
+- dropped: the hold ended after an open command and the target then fell >= DROP_M
+  within FALL_ROWS steps (released in the air); event `release`, that open command.
+- misplaced: released and set down (fell < DROP_M), but the conjunct does not hold;
+  event `release`, the open command (the release at the wrong place).
 - knocked: an object was displaced >= KNOCK_M by contact before the attempt's own failure
   event (or, in an attempt that achieved its subgoal, a goal object >= KNOCK_M or any
   object >= FAR_KNOCK_M); event `knock`, the first state it had moved >= MOTION_M.
 - half_open / not_turned: a drawer/door/knob attempt ended without its conjunct; event
   `let_go`, the step the hand stopped operating the part.
-- timeout: the episode ended inside the attempt; event `timeout`, the attempt's start.
+- timeout: the episode ended inside the attempt before anything above happened; event
+  `timeout`, the attempt's start. (An attempt the episode ended inside whose conjunct holds
+  is `achieved`: the runner stops at success before the skill looks.)
 Also per attempt, the scene change from the decisive event to the attempt's end (per
 object: moved, tilt, tilt gain, fell off, held, position), which `pipeline.truth.derive`
 turns into a recovery level. Recording only reads the simulator: actions and the noise
@@ -42,6 +47,9 @@ from pipeline import SCHEMA_VERSION
 KNOCK_M = 0.02  # displacement by contact that counts as knocking an object
 FAR_KNOCK_M = 0.05  # ... for an object the goal does not involve, in an achieved attempt
 MOTION_M = 0.003  # first motion of a knocked object (its onset)
+HELD_ROWS = 3  # states in hand that make a hold (fewer: fingers brushing the object)
+LIFT_HELD_M = 0.02  # lifted this much, one finger's touch is a hold
+DROP_M, FALL_ROWS = 0.03, 8  # fell >= DROP_M within FALL_ROWS steps of the release: dropped
 OUTCOMES = ("achieved", "missed_grasp", "lost_grasp", "dropped", "misplaced", "knocked", "half_open",
             "not_turned", "timeout")
 
@@ -101,6 +109,8 @@ class Attempt:
     reference_xy: np.ndarray | None = None
     end: int | None = None
     outcome: str = "timeout"
+    event: str | None = None
+    event_step: int | None = None
     phases: list[tuple[str, int]] = field(default_factory=list)
     noise: dict = field(default_factory=dict)
     detail: str = ""
@@ -129,8 +139,20 @@ class TruthLog:
         poses = self.scene.env.object_poses()
         self.pos.append(np.array([poses[o][0] for o in self.objects]).reshape(-1, 3))
         self.quat.append(np.array([poses[o][1] for o in self.objects]).reshape(-1, 4))
-        self.held.append(self.scene.holding_any() or "")
+        self.held.append(self._in_hand())
         self.eef.append(np.array(self.scene.eef()))
+
+    def _in_hand(self) -> str:
+        """The object between the fingers: touched by both, or by one while lifted >=
+        LIFT_HELD_M above where the episode found it (a pinch on one pad still carries it)."""
+        left, right = self.scene.env.finger_contacts()
+        both = [o for o in self.objects if o in left and o in right]
+        if both:
+            return both[0]
+        z0 = self.pos[0][:, 2]
+        z = self.pos[-1][:, 2]
+        one = [o for i, o in enumerate(self.objects) if (o in left or o in right) and z[i] - z0[i] >= LIFT_HELD_M]
+        return one[0] if one else ""
 
     def watch(self, step: int, action: np.ndarray) -> None:
         """After action `step` was applied: record it and the state it led to (row step + 1)."""
@@ -141,103 +163,105 @@ class TruthLog:
 
     # ---- called by skills and the policy ------------------------------------------------
     def begin(self, skill: str, conjunct: tuple[str, ...], target: str, reference: str | None = None) -> None:
-        self._close_open(self.step)
+        if self.attempts and self.attempts[-1].end is None:
+            self.attempts[-1].end = self.step  # stopped without a verdict: judged in rows()
         ref_xy = None
         if reference is not None:
             ref_xy = self.scene.pos(reference)[:2].copy()
         self.attempts.append(Attempt(len(self.attempts), skill, tuple(conjunct), target, reference, self.step, ref_xy))
 
+    def _open(self) -> Attempt | None:
+        return self.attempts[-1] if self.attempts and self.attempts[-1].end is None else None
+
     def note(self, **noise) -> None:
-        if self.attempts and self.attempts[-1].end is None:
-            self.attempts[-1].noise.update(noise)
+        if (a := self._open()) is not None:
+            a.noise.update(noise)
 
     def mark(self, label: str) -> None:
-        if self.attempts and self.attempts[-1].end is None:
-            self.attempts[-1].phases.append((label, self.step))
+        if (a := self._open()) is not None:
+            a.phases.append((label, self.step))
 
     def end(self, outcome: str, detail: str = "") -> None:
+        """Close the current attempt with the skill's verdict (articulated parts, knobs)."""
         if outcome not in OUTCOMES:
             raise ValueError(f"outcome {outcome!r} is not one of {OUTCOMES}")
-        if self.attempts and self.attempts[-1].end is None:
-            a = self.attempts[-1]
-            a.end, a.outcome, a.detail = self.step, outcome, detail
+        if (a := self._open()) is None:
+            return
+        a.end, a.outcome, a.detail = self.step, outcome, detail
+        if outcome in ("half_open", "not_turned"):
+            steps = [s for lab, s in a.phases if lab in ("let_go", "back_off", "retreat")]
+            a.event, a.event_step = "let_go", (min(steps) if steps else a.start)
 
-    def left_hand(self, obj: str) -> str:
-        """Why `obj` is no longer in hand: `lost_grasp` if it went while the gripper was
-        commanded closed, `dropped` if the gripper had been commanded open."""
-        rows = [t for t, h in enumerate(self.held) if h == obj]
-        if not rows or rows[-1] >= len(self.cmd):
-            return "lost_grasp"
-        return "lost_grasp" if self.cmd[rows[-1]] > 0 else "dropped"
-
-    def judge_place(self, obj: str, satisfied: bool) -> str:
-        """After a place: achieved, dropped (out of the hand before the planned release
-        began) or misplaced (released as planned, at the wrong place)."""
+    def end_hand(self, obj: str, satisfied: bool) -> None:
+        """Close a pick-and-place attempt, judged from the hand trace (module docstring)."""
+        if (a := self._open()) is None:
+            return
+        a.end = self.step
         if satisfied:
-            return "achieved"
-        a = self.attempts[-1] if self.attempts else None
-        opened = self._first("open", a) if a is not None else None
-        if opened is not None and a is not None:
-            gone = [t for t in range(a.start, min(opened, len(self.held) - 1) + 1)
-                    if self.held[t] != obj and any(self.held[u] == obj for u in range(a.start, t))]
-            if gone:
-                return "dropped"
-        return "misplaced"
+            a.outcome = "achieved"
+            return
+        run = self._held_run(a, obj)
+        if run is None:
+            a.outcome, a.event = "missed_grasp", "close"
+            a.event_step = self._first_cmd(a, self._first("descend", a), closing=True)
+            return
+        s, e = run
+        if e is not None and self.cmd[e - 1] > 0:
+            a.outcome, a.event, a.event_step = "lost_grasp", "slip", e
+            return
+        r = self._first_cmd(a, s, closing=False)
+        if r is None:  # still in hand, never opened
+            a.outcome, a.event, a.event_step = "misplaced", "release", a.end
+            return
+        z = np.array([p[self.objects.index(obj)][2] for p in self.pos[r:r + FALL_ROWS + 1]])
+        fell = float(z[0] - z.min()) if len(z) else 0.0
+        a.outcome = "dropped" if fell >= DROP_M else "misplaced"
+        a.event, a.event_step = "release", r
+        a.detail = f"fell {fell:.3f} m after the release"
 
-    def _close_open(self, step: int) -> None:
-        if self.attempts and self.attempts[-1].end is None:
-            self.attempts[-1].end = step  # an attempt that stopped without a verdict: timeout
+    def was_held(self, obj: str) -> bool:
+        """`obj` was in hand (HELD_ROWS states running) during the current attempt."""
+        a = self._open()
+        return a is not None and self._held_run(a, obj) is not None
 
     # ---- derived from the trace ---------------------------------------------------------
     def _first(self, label: str, a: Attempt) -> int | None:
         return next((s for lab, s in a.phases if lab == label), None)
 
-    def _held_by_row(self, a: Attempt, end: int) -> np.ndarray:
-        return np.array([self.held[t] == a.target for t in range(a.start, end + 1)])
+    def _held_run(self, a: Attempt, obj: str) -> tuple[int, int | None] | None:
+        """The last run of >= HELD_ROWS states with `obj` in hand that lasts past the start
+        of the lift: (first row, first row after it or None while it lasts). Shorter runs,
+        or a pinch lost before the lift, are fingers brushing the object."""
+        lifted = self._first("pick_lift", a) or a.start  # a hold must survive into the lift
+        best, start = None, None
+        for t in range(a.start, len(self.held)):
+            if self.held[t] == obj:
+                start = t if start is None else start
+            elif start is not None:
+                if t - start >= HELD_ROWS and t > lifted:
+                    best = (start, t)
+                start = None
+        if start is not None and len(self.held) - start >= HELD_ROWS:
+            best = (start, None)
+        return best
 
-    def _event(self, a: Attempt, end: int) -> tuple[str | None, int | None, str | None]:
-        cmd = np.array(self.cmd[a.start:end]) if end > a.start else np.zeros(0)
-        closed = cmd > 0
-
-        def first_after(mask: np.ndarray, step: int | None) -> int | None:
-            lo = max((step if step is not None else a.start) - a.start, 0)
-            hits = np.flatnonzero(mask[lo:])
-            return int(hits[0]) + lo + a.start if len(hits) else None
-
-        held = self._held_by_row(a, end)
-        o = a.outcome
-        if o == "missed_grasp":
-            return "close", first_after(closed, self._first("descend", a)), a.target
-        if o in ("lost_grasp", "dropped"):
-            was = np.flatnonzero(held)
-            if len(was):
-                gone = np.flatnonzero(~held[was[0]:])
-                row = int(gone[0]) + int(was[0]) + a.start if len(gone) else None
-                if o == "dropped" and row is not None:
-                    opens = np.flatnonzero(~closed[: row - a.start])
-                    row = int(opens[-1]) + a.start if len(opens) else row
-                    # the open command that began the release: the first of its run
-                    while row > a.start and not closed[row - 1 - a.start]:
-                        row -= 1
-                return ("slip" if o == "lost_grasp" else "release"), row, a.target
-            return ("slip" if o == "lost_grasp" else "release"), None, a.target
-        if o == "misplaced":
-            return "release", first_after(~closed, self._first("lower", a)), a.target
-        if o in ("half_open", "not_turned"):
-            steps = [s for lab, s in a.phases if lab in ("let_go", "back_off", "retreat")]
-            return "let_go", (min(steps) if steps else a.start), a.target
-        if o == "timeout":
-            return "timeout", a.start, a.target
-        return None, None, None
+    def _first_cmd(self, a: Attempt, since: int | None, closing: bool) -> int | None:
+        """First step at or after `since` where the gripper command turns to close/open."""
+        for t in range(max(since if since is not None else a.start, a.start), len(self.cmd)):
+            now = self.cmd[t] > 0
+            before = self.cmd[t - 1] > 0 if t > 0 else False
+            if (now and not before) if closing else (before and not now):
+                return t
+        return None
 
     def _knocks(self, a: Attempt, end: int) -> list[dict]:
-        """Objects other than the held target that moved >= KNOCK_M in the attempt."""
+        """Objects that moved >= KNOCK_M in the attempt (the target only until it was held)."""
         out = []
         p0 = self.pos[a.start]
-        held = self._held_by_row(a, end)
-        first_held = int(np.flatnonzero(held)[0]) + a.start if held.any() else end + 1
+        touched = [t for t in range(a.start, end + 1) if self.held[t] == a.target]
+        first_held = touched[0] if touched else end  # once touched by both fingers it moves with the hand
         for i, o in enumerate(self.objects):
-            stop = min(end, first_held) if o == a.target else end  # the target counts until grasped
+            stop = min(end, first_held) if o == a.target else end
             track = np.array([np.linalg.norm(self.pos[t][i] - p0[i]) for t in range(a.start, stop + 1)])
             if len(track) and track.max() >= KNOCK_M:
                 moving = np.flatnonzero(track >= MOTION_M)
@@ -246,39 +270,48 @@ class TruthLog:
 
     def _changes(self, a_row: int, b_row: int) -> list[dict]:
         out = []
-        table = self.scene.table_height() if hasattr(self.scene, "table_height") else None
         for i, o in enumerate(self.objects):
             t0 = _tilt(self.quat[0][i], self.quat[a_row][i])
             t1 = _tilt(self.quat[0][i], self.quat[b_row][i])
-            fell = bool(self.pos[b_row][i][2] < self.pos[0][i][2] - 0.1) if table is not None else False
             out.append({"object": o, "moved_m": float(np.linalg.norm(self.pos[b_row][i] - self.pos[a_row][i])),
-                        "tilt_deg": t1, "tilt_gain_deg": t1 - t0, "fell_off": fell,
+                        "tilt_deg": t1, "tilt_gain_deg": t1 - t0,
+                        "fell_off": bool(self.pos[b_row][i][2] < self.pos[0][i][2] - 0.1),
                         "held": self.held[b_row] == o, "position": self.pos[b_row][i].astype(np.float32).tolist()})
         return out
+
+    def _unfinished(self, a: Attempt, last: int) -> None:
+        """An attempt the episode ended inside (or that stopped without a verdict)."""
+        if self.scene.satisfied(a.conjunct):
+            a.outcome = "achieved"  # the goal check ended the episode before the skill looked
+        elif a.skill in ("open", "close", "turn_on", "turn_off") and \
+                any(lab in ("let_go", "back_off", "retreat") for lab, _ in a.phases):
+            a.outcome = "half_open" if a.skill in ("open", "close") else "not_turned"
+            a.event, a.event_step = "let_go", min(s for lab, s in a.phases if lab in ("let_go", "back_off", "retreat"))
+        else:
+            a.outcome, a.event, a.event_step = "timeout", "timeout", a.start
+        if a.end is None:
+            a.end = last
 
     def rows(self) -> list[dict]:
         last = len(self.cmd)  # state rows run 0 .. last
         out = []
+        idx = {o: i for i, o in enumerate(self.objects)}
         for a in self.attempts:
-            end = min(a.end if a.end is not None else last, last)
-            if a.end is None or a.end > last:
-                a.outcome = "timeout"
+            if a.end is None or a.outcome == "timeout":
+                self._unfinished(a, last)
+            end = min(a.end, last)
             achieved = a.outcome == "achieved"
-            kind, step, obj = self._event(a, end)
+            kind, step, obj = a.event, a.event_step, (a.target if a.event else None)
             knocks = self._knocks(a, end)
-            idx = {o: i for i, o in enumerate(self.objects)}
-            if knocks:
-                k = min(knocks, key=lambda d: d["step"])
-                counts = (k["step"] < step) if step is not None else not achieved
-                if achieved:
-                    big = [d for d in knocks if d["object"] in self.goal_objects or d["moved_m"] >= FAR_KNOCK_M]
-                    counts = bool(big)
-                    k = min(big, key=lambda d: d["step"]) if big else k
-                if counts and a.outcome != "timeout":
-                    a.outcome, kind, step, obj = "knocked", "knock", k["step"], k["object"]
+            counted = [k for k in knocks if step is None or k["step"] < step]
+            if achieved:  # a subgoal reached, but did it disturb the scene?
+                counted = [k for k in knocks if k["moved_m"] >= FAR_KNOCK_M or
+                           (k["object"] in self.goal_objects and k["object"] not in (a.target, a.reference))]
+            if counted and a.outcome != "timeout":
+                k = min(counted, key=lambda d: d["step"])
+                a.outcome, kind, step, obj = "knocked", "knock", k["step"], k["object"]
             step = None if step is None else int(min(max(step, a.start), last))
-            grip_err = None
-            rel = None
+            grip_err = rel = None
             if kind == "close" and step is not None and a.target in idx:
                 grip_err = float(np.linalg.norm(self.pos[step][idx[a.target]] - self.eef[step]))
             if kind == "release" and step is not None and a.reference_xy is not None and a.target in idx:
