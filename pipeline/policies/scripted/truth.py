@@ -21,7 +21,7 @@ runs, or a pinch lost before the lift, are fingers brushing it.
 - misplaced: released and set down (fell < DROP_M), but the conjunct does not hold;
   event `release`, the open command (the release at the wrong place).
 - knocked: an object was displaced >= KNOCK_M by contact before the attempt's own failure
-  event (or, in an attempt that achieved its subgoal, a goal object >= KNOCK_M or any
+  event (the target only before the fingers began closing on it) (or, in an attempt that achieved its subgoal, a goal object >= KNOCK_M or any
   object >= FAR_KNOCK_M); event `knock`, the first state it had moved >= MOTION_M.
 - half_open / not_turned: a drawer/door/knob attempt ended without its conjunct; event
   `let_go`, the step the hand stopped operating the part.
@@ -255,13 +255,16 @@ class TruthLog:
         return None
 
     def _knocks(self, a: Attempt, end: int) -> list[dict]:
-        """Objects that moved >= KNOCK_M in the attempt (the target only until it was held)."""
+        """Objects that moved >= KNOCK_M in the attempt (the target only before the close)."""
         out = []
         p0 = self.pos[a.start]
+        # the target counts until the fingers start closing on it (or hold it): what the
+        # closing fingers do to it is the grasp itself, not a knock
         touched = [t for t in range(a.start, end + 1) if self.held[t] == a.target]
-        first_held = touched[0] if touched else end  # once touched by both fingers it moves with the hand
+        close = self._first_cmd(a, self._first("descend", a), closing=True) if a.skill == "pick_place" else None
+        first_held = min(x for x in (end, close, touched[0] if touched else None) if x is not None)
         for i, o in enumerate(self.objects):
-            stop = min(end, first_held) if o == a.target else end
+            stop = first_held if o == a.target else end
             track = np.array([np.linalg.norm(self.pos[t][i] - p0[i]) for t in range(a.start, stop + 1)])
             if len(track) and track.max() >= KNOCK_M:
                 moving = np.flatnonzero(track >= MOTION_M)
