@@ -227,10 +227,12 @@ def markdown(report: dict, localizer: str, run_dir: Path) -> str:
              f"Failed episodes: {report['failed']}, with truth: {report['truths']} "
              f"(set aside: {report['set_aside_reasons'] or 'none'}).", "",
              "| figure | value |", "|---|---|",
-             f"| localized | {report['localized']} of {report['truths']} (misses: {report['unlocalized_reasons'] or '-'}) |",
+             f"| localized | {report['localized']} of {report['truths']} "
+             f"(misses: {report['unlocalized_reasons'] or '-'}) |",
              f"| onset MAE | {report['onset_mae_s']} s (median {report['onset_median_abs_s']} s) |",
              f"| within ±0.5 s / ±1 s | {pct(report['within_0_5s'])} / {pct(report['within_1s'])} |",
-             f"| before / at / after truth | {report['before_truth']} / {report['at_truth']} / {report['after_truth']} |",
+             f"| before / at / after truth | {report['before_truth']} / {report['at_truth']} / "
+             f"{report['after_truth']} |",
              f"| level accuracy | {pct(report['level_accuracy'])} (of {report['characterized']}) |",
              f"| category accuracy | {pct(report['category_accuracy'])} (of {report['characterized']}) |",
              f"| truth outcomes | {report['truth_outcomes']} |", ""]

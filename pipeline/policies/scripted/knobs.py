@@ -60,4 +60,5 @@ def turn_knob(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:
         ctx.yaw_hold = yaw + spin * dq
         yield ctx.move(s.eef() + [0, 0, 0.08], yaw=ctx.yaw_hold, tol=0.02, label="retreat")
         if ctx.truth is not None:
-            ctx.end("achieved" if s.satisfied(conjunct) else "not_turned", f"{joint} at {env.joint_frame(joint)['qpos']:.3f}")
+            q_now = env.joint_frame(joint)["qpos"]
+            ctx.end("achieved" if s.satisfied(conjunct) else "not_turned", f"{joint} at {q_now:.3f}")

@@ -21,8 +21,9 @@ runs, or a pinch lost before the lift, are fingers brushing it.
 - misplaced: released and set down (fell < DROP_M), but the conjunct does not hold;
   event `release`, the open command (the release at the wrong place).
 - knocked: an object was displaced >= KNOCK_M by contact before the attempt's own failure
-  event (the target only before the fingers began closing on it) (or, in an attempt that achieved its subgoal, a goal object >= KNOCK_M or any
-  object >= FAR_KNOCK_M); event `knock`, the first state it had moved >= MOTION_M.
+  event (the target only before the fingers began closing on it), or, in an attempt that
+  achieved its subgoal, another goal object >= KNOCK_M or any object >= FAR_KNOCK_M;
+  event `knock`, the first state it had moved >= MOTION_M.
 - half_open / not_turned: a drawer/door/knob attempt ended without its conjunct; event
   `let_go`, the step the hand stopped operating the part.
 - timeout: the episode ended inside the attempt before anything above happened; event
