@@ -93,6 +93,8 @@ def read_truth(path: str | Path) -> tuple[list[dict], dict]:
         raise TruthError("bad_truth", f"{path}: missing column(s) {missing}")
     raw = (table.schema.metadata or {}).get(b"truth")
     meta = json.loads(raw) if raw else {}
+    if meta.get("error"):
+        raise TruthError("truth_error", f"{path}: the generator's recording failed: {meta['error']}")
     return sorted(table.to_pylist(), key=lambda r: r["attempt"]), meta
 
 

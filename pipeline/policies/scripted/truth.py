@@ -17,7 +17,8 @@ runs, or a pinch lost before the lift, are fingers brushing it.
 - lost_grasp: the hold ended while the gripper was still commanded closed; event `slip`,
   the first state without the target in hand.
 - dropped: the hold ended after an open command and the target then fell >= DROP_M
-  within FALL_ROWS steps (released in the air); event `release`, that open command.
+  within FALL_ROWS steps (released in the air); event `release`, the open command that
+  began the opening it left the hand in.
 - misplaced: released and set down (fell < DROP_M), but the conjunct does not hold;
   event `release`, the open command (the release at the wrong place).
 - knocked: an object was displaced >= KNOCK_M by contact before the attempt's own failure
@@ -37,6 +38,7 @@ stream are exactly those of an unrecorded run.
 
 from __future__ import annotations
 
+import functools
 import json
 from dataclasses import dataclass, field
 
@@ -50,7 +52,7 @@ FAR_KNOCK_M = 0.05  # ... for an object the goal does not involve, in an achieve
 MOTION_M = 0.003  # first motion of a knocked object (its onset)
 HELD_ROWS = 3  # states in hand that make a hold (fewer: fingers brushing the object)
 LIFT_HELD_M = 0.02  # lifted this much, one finger's touch is a hold
-DROP_M, FALL_ROWS = 0.03, 8  # fell >= DROP_M within FALL_ROWS steps of the release: dropped
+DROP_M, FALL_ROWS = 0.03, 8  # fell >= DROP_M within FALL_ROWS steps of leaving the hand: dropped
 OUTCOMES = ("achieved", "missed_grasp", "lost_grasp", "dropped", "misplaced", "knocked", "half_open",
             "not_turned", "timeout")
 
@@ -117,8 +119,25 @@ class Attempt:
     detail: str = ""
 
 
+def _safe(method):
+    """Recording must never cost the episode: the first error turns the log off (no truth
+    is written for the episode) and the generator goes on exactly as unrecorded."""
+    @functools.wraps(method)
+    def wrapped(self, *args, **kwargs):
+        if self.error is not None:
+            return None
+        try:
+            return method(self, *args, **kwargs)
+        except Exception as e:  # noqa: BLE001
+            self.error = f"{method.__name__}: {type(e).__name__}: {e}"
+            return None
+    return wrapped
+
+
 class TruthLog:
     """Attempts and a per-step privileged trace of one episode (see the module docstring)."""
+
+    error: str | None = None
 
     def __init__(self, scene, action_noise: float, speed: float):
         self.scene = scene
@@ -133,6 +152,10 @@ class TruthLog:
         self.pos: list[np.ndarray] = []  # (n_objects, 3) in state row t
         self.quat: list[np.ndarray] = []
         self.eef: list[np.ndarray] = []  # grip site in state row t
+        self._start()
+
+    @_safe
+    def _start(self) -> None:
         self._sample()
 
     # ---- per step -------------------------------------------------------------------------
@@ -155,6 +178,7 @@ class TruthLog:
         one = [o for i, o in enumerate(self.objects) if (o in left or o in right) and z[i] - z0[i] >= LIFT_HELD_M]
         return one[0] if one else ""
 
+    @_safe
     def watch(self, step: int, action: np.ndarray) -> None:
         """After action `step` was applied: record it and the state it led to (row step + 1)."""
         if step != len(self.cmd):
@@ -163,6 +187,7 @@ class TruthLog:
         self._sample()
 
     # ---- called by skills and the policy ------------------------------------------------
+    @_safe
     def begin(self, skill: str, conjunct: tuple[str, ...], target: str, reference: str | None = None) -> None:
         if self.attempts and self.attempts[-1].end is None:
             self.attempts[-1].end = self.step  # stopped without a verdict: judged in rows()
@@ -174,10 +199,12 @@ class TruthLog:
     def _open(self) -> Attempt | None:
         return self.attempts[-1] if self.attempts and self.attempts[-1].end is None else None
 
+    @_safe
     def note(self, **noise) -> None:
         if (a := self._open()) is not None:
             a.noise.update(noise)
 
+    @_safe
     def mark(self, label: str) -> None:
         if (a := self._open()) is not None:
             a.phases.append((label, self.step))
@@ -193,6 +220,7 @@ class TruthLog:
             steps = [s for lab, s in a.phases if lab in ("let_go", "back_off", "retreat")]
             a.event, a.event_step = "let_go", (min(steps) if steps else a.start)
 
+    @_safe
     def end_hand(self, obj: str, satisfied: bool) -> None:
         """Close a pick-and-place attempt, judged from the hand trace (module docstring)."""
         if (a := self._open()) is None:
@@ -207,23 +235,21 @@ class TruthLog:
             a.event_step = self._first_cmd(a, self._first("descend", a), closing=True)
             return
         s, e = run
-        if e is not None and self.cmd[e - 1] > 0:
+        if e is None:  # still in hand: the release did not free it
+            r = self._first_cmd(a, self._first("lower", a) or s, closing=False)
+            a.outcome, a.event, a.event_step = "misplaced", "release", (a.end if r is None else r)
+            return
+        if self.cmd[e - 1] > 0:
             a.outcome, a.event, a.event_step = "lost_grasp", "slip", e
             return
-        r = self._first_cmd(a, s, closing=False)
-        if r is None:  # still in hand, never opened
-            a.outcome, a.event, a.event_step = "misplaced", "release", a.end
-            return
-        z = np.array([p[self.objects.index(obj)][2] for p in self.pos[r:r + FALL_ROWS + 1]])
+        r = e - 1  # the open command that began the run of opening it left the hand in
+        while r > s and self.cmd[r - 1] <= 0:
+            r -= 1
+        z = np.array([p[self.objects.index(obj)][2] for p in self.pos[r:e + FALL_ROWS + 1]])
         fell = float(z[0] - z.min()) if len(z) else 0.0
         a.outcome = "dropped" if fell >= DROP_M else "misplaced"
         a.event, a.event_step = "release", r
         a.detail = f"fell {fell:.3f} m after the release"
-
-    def was_held(self, obj: str) -> bool:
-        """`obj` was in hand (HELD_ROWS states running) during the current attempt."""
-        a = self._open()
-        return a is not None and self._held_run(a, obj) is not None
 
     # ---- derived from the trace ---------------------------------------------------------
     def _first(self, label: str, a: Attempt) -> int | None:
@@ -338,8 +364,15 @@ class TruthLog:
         return out
 
     def table(self) -> pa.Table:
+        """The attempts; when recording failed, no rows and the error in the metadata."""
+        rows: list[dict] = []
+        if self.error is None:
+            try:
+                rows = self.rows()
+            except Exception as e:  # noqa: BLE001 - a truth we cannot trust is reported, not guessed
+                self.error = f"rows: {type(e).__name__}: {e}"
         meta = dict(TRUTH_SCHEMA.metadata)
         meta[b"truth"] = json.dumps({"objects": self.objects, "fixtures": list(self.scene.env.fixture_names),
                                      "goal": [list(c) for c in self.scene.env.goal],
-                                     "steps": len(self.cmd)}).encode()
-        return pa.Table.from_pylist(self.rows(), schema=TRUTH_SCHEMA.with_metadata(meta))
+                                     "steps": len(self.cmd), "error": self.error}).encode()
+        return pa.Table.from_pylist([] if self.error else rows, schema=TRUTH_SCHEMA.with_metadata(meta))
