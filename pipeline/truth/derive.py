@@ -10,12 +10,14 @@ Rules:
 - Attempt: the first attempt (in execution order) whose outcome is not `achieved`. Later
   attempts are retries or other subgoals; the label describes the first thing that went
   wrong. No such attempt (every attempt achieved its subgoal, the goal fell apart later, or
-  no skill ever started) -> no truth, reason `no_failed_attempt`.
+  the episode ended before the next skill started) -> no truth, reason `no_failed_attempt`;
+  a first failed attempt that only ran out of time made no mistake to localize -> no
+  truth, reason `timeout`. Both are counted in the benchmark's set-aside reasons.
 - Onset: that attempt's decisive event step (its meaning per outcome is in the record's
   module docstring): the gripper closing off target (missed_grasp), the state the object
   left the closed hand (lost_grasp), the opening that released it (dropped, misplaced), the
   first motion of the object the contact displaced (knocked), the hand letting go of a part
-  left half open / a knob not turned (half_open, not_turned), the attempt's start (timeout).
+  left half open / a knob not turned (half_open, not_turned).
 - Category (the project's six, `records.Category`):
   missed_grasp, lost_grasp                  -> grasp_failure
   dropped                                   -> placement_failure if released within
@@ -26,7 +28,7 @@ Rules:
                                                is a goal target, else
                                                collision_or_interaction_failure
   half_open, not_turned                     -> collision_or_interaction_failure
-  timeout                                   -> other
+  anything else                             -> other
   (environmental_obstruction is never expected: the generator does not know when a
   fixture blocked it.)
 - Level: the taxonomy (annotations/README.md) applied to the privileged scene change from
@@ -141,6 +143,9 @@ def derive(key: str, rows: list[dict], meta: dict, control_hz: int = 20) -> Epis
     if not failed:
         raise TruthError("no_failed_attempt", f"{key}: every recorded attempt achieved its subgoal")
     row = failed[0]
+    if row["outcome"] == "timeout":
+        raise TruthError("timeout", f"{key}: attempt {row['attempt']} ran out of time without a mistake: "
+                                    "no onset to score")
     if row["event_step"] is None:
         raise TruthError("no_event", f"{key}: attempt {row['attempt']} ({row['outcome']}) has no decisive step")
     goal = meta.get("goal") or []
