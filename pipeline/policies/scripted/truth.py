@@ -8,12 +8,13 @@ privileged state). Output: `table()`, a `TRUTH_SCHEMA` table written by stage 1 
 
 Per attempt: the skill and its objects, the steps it spanned, the noise actually applied,
 and the outcome the expert judges from privileged state (`Outcome`), plus the step and
-kind of its decisive event:
+kind of its decisive event. A pick-and-place failure is judged from the whole trace when
+the table is written, since the release an expert makes after giving up comes later.
 A hold is a run of >= HELD_ROWS states with the target in hand (touched by both fingers,
 or by one while lifted >= LIFT_HELD_M) that lasts into the lift after the close; shorter
 runs, or a pinch lost before the lift, are fingers brushing it.
 - missed_grasp: no hold in the attempt; event `close`, the first gripper-close command
-  after the descent began (the gripper closing off target).
+  after the descent began that lasts >= HELD_ROWS steps (the gripper closing off target).
 - lost_grasp: the hold ended while the gripper was still commanded closed; event `slip`,
   the first state without the target in hand.
 - dropped: the hold ended after an open command and the target then fell >= DROP_M
@@ -21,10 +22,11 @@ runs, or a pinch lost before the lift, are fingers brushing it.
   began the opening it left the hand in.
 - misplaced: released and set down (fell < DROP_M), but the conjunct does not hold;
   event `release`, the open command (the release at the wrong place).
-- knocked: an object was displaced >= KNOCK_M by contact before the attempt's own failure
-  event (the target only before the fingers began closing on it), or, in an attempt that
-  achieved its subgoal, another goal object >= KNOCK_M or any object >= FAR_KNOCK_M;
-  event `knock`, the first state it had moved >= MOTION_M.
+- knocked: an object was displaced >= KNOCK_M (or tipped >= TOPPLE_DEG) by contact
+  before the attempt's own failure event (the target only before the fingers began
+  closing on it), or, in an attempt that achieved its subgoal, another goal object
+  >= KNOCK_M or any object >= FAR_KNOCK_M; event `knock`, the first state it had moved
+  >= MOTION_M (or tilted >= TILT_START_DEG).
 - half_open / not_turned: a drawer/door/knob attempt ended without its conjunct; event
   `let_go`, the step the hand stopped operating the part.
 - timeout: the episode ended inside the attempt before anything above happened; event
@@ -50,6 +52,7 @@ from pipeline import SCHEMA_VERSION
 KNOCK_M = 0.02  # displacement by contact that counts as knocking an object
 FAR_KNOCK_M = 0.05  # ... for an object the goal does not involve, in an achieved attempt
 MOTION_M = 0.003  # first motion of a knocked object (its onset)
+TOPPLE_DEG, TILT_START_DEG = 45.0, 10.0  # tipped over counts as knocked; its onset: first 10 deg
 HELD_ROWS = 3  # states in hand that make a hold (fewer: fingers brushing the object)
 LIFT_HELD_M = 0.02  # lifted this much, one finger's touch is a hold
 DROP_M, FALL_ROWS = 0.03, 8  # fell >= DROP_M within FALL_ROWS steps of leaving the hand: dropped
@@ -114,6 +117,7 @@ class Attempt:
     outcome: str = "timeout"
     event: str | None = None
     event_step: int | None = None
+    hand: str | None = None  # the object a pick-and-place attempt judged from the hand trace
     phases: list[tuple[str, int]] = field(default_factory=list)
     noise: dict = field(default_factory=dict)
     detail: str = ""
@@ -222,20 +226,23 @@ class TruthLog:
 
     @_safe
     def end_hand(self, obj: str, satisfied: bool) -> None:
-        """Close a pick-and-place attempt, judged from the hand trace (module docstring)."""
+        """Close a pick-and-place attempt. Success is judged now; a failure is judged from
+        the whole trace in `rows()`, since what the hand did with the object (a release the
+        expert only makes after giving up) may come after the attempt (module docstring)."""
         if (a := self._open()) is None:
             return
-        a.end = self.step
-        if satisfied:
-            a.outcome = "achieved"
-            return
+        a.end, a.hand = self.step, obj
+        a.outcome = "achieved" if satisfied else "pending"
+
+    def _judge_hand(self, a: Attempt) -> None:
+        obj = a.hand
         run = self._held_run(a, obj)
         if run is None:
             a.outcome, a.event = "missed_grasp", "close"
             a.event_step = self._first_cmd(a, self._first("descend", a), closing=True)
             return
         s, e = run
-        if e is None:  # still in hand: the release did not free it
+        if e is None:  # still in hand when the episode ended: never released
             r = self._first_cmd(a, self._first("lower", a) or s, closing=False)
             a.outcome, a.event, a.event_step = "misplaced", "release", (a.end if r is None else r)
             return
@@ -256,28 +263,33 @@ class TruthLog:
         return next((s for lab, s in a.phases if lab == label), None)
 
     def _held_run(self, a: Attempt, obj: str) -> tuple[int, int | None] | None:
-        """The last run of >= HELD_ROWS states with `obj` in hand that lasts past the start
-        of the lift: (first row, first row after it or None while it lasts). Shorter runs,
-        or a pinch lost before the lift, are fingers brushing the object."""
-        lifted = self._first("pick_lift", a) or a.start  # a hold must survive into the lift
-        best, start = None, None
-        for t in range(a.start, len(self.held)):
-            if self.held[t] == obj:
-                start = t if start is None else start
-            elif start is not None:
-                if t - start >= HELD_ROWS and t > lifted:
-                    best = (start, t)
-                start = None
-        if start is not None and len(self.held) - start >= HELD_ROWS:
-            best = (start, None)
+        """The last run of >= HELD_ROWS states with `obj` in hand that starts inside the
+        attempt and lasts past the start of its lift: (first row, first row after it, or None
+        if it lasts to the end). Shorter runs, or a pinch lost before the lift, are fingers
+        brushing the object. The run is followed past the attempt's end."""
+        lifted = self._first("pick_lift", a) or a.start
+        stop = a.end if a.end is not None else len(self.held)
+        best, t, n = None, a.start, len(self.held)
+        while t < stop:
+            if self.held[t] != obj:
+                t += 1
+                continue
+            e = t
+            while e < n and self.held[e] == obj:
+                e += 1
+            if e - t >= HELD_ROWS and e > lifted:
+                best = (t, e if e < n else None)
+            t = e
         return best
 
     def _first_cmd(self, a: Attempt, since: int | None, closing: bool) -> int | None:
-        """First step at or after `since` where the gripper command turns to close/open."""
-        for t in range(max(since if since is not None else a.start, a.start), len(self.cmd)):
-            now = self.cmd[t] > 0
-            before = self.cmd[t - 1] > 0 if t > 0 else False
-            if (now and not before) if closing else (before and not now):
+        """First step at or after `since` where the gripper command turns to close / open
+        and stays so >= HELD_ROWS steps (a one-step flicker barely moves the fingers)."""
+        c = np.array(self.cmd) > 0
+        for t in range(max(since if since is not None else a.start, a.start), len(c)):
+            run = c[t:t + HELD_ROWS]
+            turned = (t == 0 or c[t - 1] != closing)
+            if turned and len(run) and (run.all() if closing else not run.any()):
                 return t
         return None
 
@@ -292,9 +304,11 @@ class TruthLog:
         first_held = min(x for x in (end, close, touched[0] if touched else None) if x is not None)
         for i, o in enumerate(self.objects):
             stop = first_held if o == a.target else end
-            track = np.array([np.linalg.norm(self.pos[t][i] - p0[i]) for t in range(a.start, stop + 1)])
-            if len(track) and track.max() >= KNOCK_M:
-                moving = np.flatnonzero(track >= MOTION_M)
+            rows = range(a.start, stop + 1)
+            track = np.array([np.linalg.norm(self.pos[t][i] - p0[i]) for t in rows])
+            tilt = np.array([_tilt(self.quat[a.start][i], self.quat[t][i]) for t in rows])
+            if len(track) and (track.max() >= KNOCK_M or tilt.max() >= TOPPLE_DEG):
+                moving = np.flatnonzero((track >= MOTION_M) | (tilt >= TILT_START_DEG))
                 out.append({"object": o, "moved_m": float(track.max()), "step": int(moving[0]) + a.start})
         return out
 
@@ -327,6 +341,8 @@ class TruthLog:
         out = []
         idx = {o: i for i, o in enumerate(self.objects)}
         for a in self.attempts:
+            if a.outcome == "pending":
+                self._judge_hand(a)
             if a.end is None or a.outcome == "timeout":
                 self._unfinished(a, last)
             end = min(a.end, last)
