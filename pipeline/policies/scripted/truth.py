@@ -32,7 +32,8 @@ runs, or a pinch lost before the lift, are fingers brushing it.
 - timeout: the episode ended inside the attempt before anything above happened; event
   `timeout`, the attempt's start. (An attempt the episode ended inside whose conjunct holds
   is `achieved`: the runner stops at success before the skill looks.)
-Also per attempt, the scene change from the decisive event to the attempt's end (per
+Also per attempt, the scene change from the decisive event to the attempt's end, and at
+least FALL_ROWS steps after the event (per
 object: moved, tilt, tilt gain, fell off, held, position), which `pipeline.truth.derive`
 turns into a recovery level. Recording only reads the simulator: actions and the noise
 stream are exactly those of an unrecorded run.
@@ -375,7 +376,10 @@ class TruthLog:
                 "action_noise": self.action_noise, "speed_factor": self.speed, "subgoal_achieved": achieved,
                 "outcome": a.outcome, "event": kind, "event_step": step, "event_object": obj,
                 "grip_error_m": grip_err, "release_dist_m": rel, "knocked": knocks,
-                "changes": self._changes(step, end) if step is not None else [], "detail": a.detail,
+                # the scene once the failure played out: an object let go falls for a while,
+                # also when the expert let go only after the attempt (see _judge_hand)
+                "changes": self._changes(step, min(max(end, step + FALL_ROWS), last)) if step is not None else [],
+                "detail": a.detail,
             })
         return out
 
