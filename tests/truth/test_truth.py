@@ -131,3 +131,29 @@ def test_an_exact_localizer_scores_all_within_and_misses_count_against_it():
     assert (r["within_0_5s"], r["localized"], r["unlocalized"]) == (0.75, 3, 1)
     assert r["level_accuracy"] == 0.0 and r["level_confusion"]["L1"] == {"L1": 0, "L2": 3, "L3": 0, "L4": 0, "none": 1}
     assert r["worst"][0]["error_s"] is None  # a miss is the worst case
+
+
+@pytest.mark.sim
+@pytest.mark.xdist_group("truth_run")
+def test_the_transformers_backend_goes_through_bench_localize_with_a_tiny_qwen(truth_run, tmp_path):
+    import importlib.util
+
+    if not all(importlib.util.find_spec(m) for m in ("transformers", "torchvision", "torch")):
+        pytest.skip("the `vlm` extra (torch, torchvision, transformers) is not installed")
+    from pipeline.vlm.torch_compat import ensure_torchvision
+
+    ensure_torchvision()
+    from pipeline.config import Config
+    from pipeline.truth.bench import run as bench
+    from tests.vlm.tiny_qwen import build_tiny_qwen
+
+    run, _ = truth_run
+    model = build_tiny_qwen(tmp_path / "qwen", "qwen2_5_vl")
+    cfg = Config.model_validate({"run": {"output_dir": str(run)}, "stage2": {"vlm": {
+        "backend": "transformers", "language": "en",
+        "transformers": {"model_path": str(model), "max_new_tokens": 16}}}})
+    report = bench(cfg, "transformers", tmp_path / "bench")
+    # random weights answer nonsense: every episode is scored as a miss, with the parser's reason
+    assert report["truths"] == 2 and report["localizer"] == "transformers"
+    assert report["localized"] + sum(report["unlocalized_reasons"].values()) == 2
+    assert (tmp_path / "bench" / "report.json").is_file()
