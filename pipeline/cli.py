@@ -120,6 +120,22 @@ def evaluate(config: Path = CONFIG, dry_run: bool = DRY) -> None:
     _call("pipeline.eval.run:run", _load(config, dry_run))
 
 
+@app.command("bench-localize")
+def bench_localize(
+    config: Path = CONFIG,
+    localizer: str = typer.Option("simstate", "--localizer", "-l", help="simstate | openai | transformers"),
+    out: Path = typer.Option(None, help="report folder (default <run>/bench/localize_<localizer>)"),
+) -> None:
+    """Score a localizer against the scripted generator's own truth on a run folder."""
+    report = _call("pipeline.truth.bench:run", _load(config), localizer, out)
+    from pipeline.truth.bench import summary_lines
+
+    for line in summary_lines(report):
+        console.print(line)
+    folder = out or _load(config).out / "bench" / f"localize_{localizer}"
+    console.print(f"report {folder / 'report.md'}" + (f", plots {len(report['plots'])}" if report["plots"] else ""))
+
+
 def _add_review() -> None:
     try:
         from pipeline.review.cli import app as review_app

@@ -12,8 +12,11 @@ Run folder (`run.output_dir`):
                                          row t = state before action t; last row = final state
         video_<camera>.mp4               rendered from states.npy
         frames.parquet                   frame index <-> simulator step (FRAME_SCHEMA)
+        truth.parquet                    the scripted generator's own record of its attempts
+                                         (pipeline/policies/scripted/truth.py; scripted only)
     stage1/_done/                        completion markers (written last)
     stage2/ ... stage3/ ... release/ ... eval/   (see each stage's module docstring)
+    bench/localize_<localizer>/          `recover bench-localize` reports (pipeline/truth/bench.py)
 """
 
 from __future__ import annotations

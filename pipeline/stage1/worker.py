@@ -3,7 +3,8 @@
 Inputs: a `Shard`, the run's `Config` (as a dict, so it pickles cheaply), an optional
 policy factory (tests; default `make_policy`), and `emit` for progress events.
 Outputs per episode, in `stage1/<episode folder>/`: `states.npy`, `steps.parquet`, videos
-and `frames.parquet` when rendered; then the done marker `stage1/_done/<unit_id>.done`
+and `frames.parquet` when rendered, `truth.parquet` when the policy keeps a truth log
+(the scripted generator: `pipeline.policies.scripted.truth`); then the done marker `stage1/_done/<unit_id>.done`
 holding the EpisodeRecord (JSON).
 
 Invariants: an episode is `reset_to_init(i)`, `settle(settle_steps)` (zero actions, gripper
@@ -22,7 +23,9 @@ import traceback
 from collections.abc import Callable
 from pathlib import Path
 
-from pipeline.atomic import Completions, write_text
+import pyarrow.parquet as pq
+
+from pipeline.atomic import Completions, write_text, write_with
 from pipeline.config import Config, PolicyConfig
 from pipeline.errors import FatalError
 from pipeline.policies.base import Policy
@@ -77,9 +80,19 @@ def run_one(env: SimEnv, policy: Policy, unit: EpisodeUnit, cfg: Config, stage1_
     env.settle(r.settle_steps)
     policy.reset(env.task, unit.seed)
     rec = EpisodeRecorder(env)
-    result = run_episode(env, policy, r.horizon, r.chunk_size, r.stop_on_success, on_step=rec.on_step)
+    watch = getattr(policy, "on_step", None)  # the scripted generator's truth log
+
+    def on_step(info) -> None:
+        rec.on_step(info)
+        if watch is not None:
+            watch(info.step, info.action)
+
+    result = run_episode(env, policy, r.horizon, r.chunk_size, r.stop_on_success, on_step=on_step)
     wall = time.perf_counter() - t0
     rec.write(folder)
+    truth = policy.truth_table() if hasattr(policy, "truth_table") else None
+    if truth is not None:
+        write_with(folder / "truth.parquet", lambda p: pq.write_table(truth, p))
     videos: dict[str, str] = {}
     if should_render(v.render, result.success):
         videos = render_videos(env, rec.states_array(), folder, list(v.cameras), v.fps, v.resolution, v.quality)

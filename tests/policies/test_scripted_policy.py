@@ -94,3 +94,39 @@ def test_act_without_privileged_state_names_the_problem(spatial_env):
     obs.sim = None
     with pytest.raises(ValueError, match="privileged state"):
         policy.act(obs)
+
+
+@pytest.mark.sim
+def test_recording_the_truth_changes_no_action_even_when_the_recording_fails(spatial_env, monkeypatch):
+    import json
+
+    from pipeline.policies.scripted.truth import TruthLog
+
+    task, env = spatial_env
+    policy = make_scripted_policy(ScriptedPolicyConfig(noise=NOISY))
+
+    def watched() -> list[np.ndarray]:
+        start(env)
+        policy.reset(task, 3)
+        acts = []
+
+        def hook(info):
+            acts.append(info.action.copy())
+            policy.on_step(info.step, info.action)
+
+        run_episode(env, policy, horizon=60, chunk_size=8, on_step=hook)
+        return acts
+
+    plain = record_actions(task, env, policy, seed=3, steps=60)  # nobody watches the steps
+    recorded = watched()
+    table = policy.truth_table()
+    assert table.num_rows >= 1 and table.column("skill")[0].as_py() == "pick_place"
+
+    def boom(self):
+        raise RuntimeError("sensor fault")
+
+    monkeypatch.setattr(TruthLog, "_sample", boom)
+    broken = watched()
+    assert np.array_equal(np.array(plain), np.array(recorded)) and np.array_equal(np.array(plain), np.array(broken))
+    meta = json.loads(policy.truth_table().schema.metadata[b"truth"])
+    assert policy.truth_table().num_rows == 0 and "sensor fault" in meta["error"]

@@ -75,10 +75,14 @@ def _operate_part(ctx: Ctx, conjunct: tuple[str, ...], opening: bool) -> Plan:
         state = env.object_state(conjunct[1])
         if state.is_open() if opening else state.is_close():
             return
+        ctx.begin("open" if opening else "close", conjunct, conjunct[1])
         if env.joint_frame(joint)["kind"] == "slide":
             yield from _pull_drawer(ctx, joint) if opening else _push_drawer(ctx, joint)
         else:
             yield from _swing_door(ctx, joint, opening=opening)
+        if ctx.truth is not None:
+            done = state.is_open() if opening else state.is_close()
+            ctx.end("achieved" if done else "half_open", f"{joint} at {env.joint_frame(joint)['qpos']:.3f}")
 
 
 def open_part(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:
@@ -99,7 +103,9 @@ def _pull_drawer(ctx: Ctx, joint: str) -> Plan:
     box, k, d = _handle(env, joint, pull)
     front = box[1, k] if d > 0 else box[0, k]
     back = box[0, k] if d > 0 else box[1, k]
-    pos = (box[0] + box[1]) / 2 + ctx.noise.grasp_offset() * [0.5, 0.5, 0.5]
+    offset = ctx.noise.grasp_offset() * [0.5, 0.5, 0.5]
+    ctx.note(grasp_offset=offset)
+    pos = (box[0] + box[1]) / 2 + offset
     pos[k] = (front + back) / 2 - d * 0.003
     approach = -np.array([pull[0], pull[1], 0.0]) / np.linalg.norm(pull[:2])
     yaw = 0.0 if k == 1 else np.pi / 2
@@ -115,7 +121,9 @@ def _pull_drawer(ctx: Ctx, joint: str) -> Plan:
     yield Grip(-1.0, 5, label="open_fully")
     yield Grip(1.0, 3, label="half_close")
     yield ctx.move(pos, gripper=0.0, speed=0.4, yaw=yaw, approach=approach, tol=0.006, max_steps=50, label="reach_handle")
-    yield Grip(1.0, ctx.close_steps + max(ctx.noise.timing(), 0), label="grip_handle")
+    t = ctx.noise.timing()
+    ctx.note(grasp_timing=t)
+    yield Grip(1.0, ctx.close_steps + max(t, 0), label="grip_handle")
     u = sign * env.joint_frame(joint)["qpos"]  # how open it is now
     full = float(np.max(np.abs(fr["range"])))
     target = s.eef() + pull * (full - u + 0.01)

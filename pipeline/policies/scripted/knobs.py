@@ -30,7 +30,10 @@ def turn_knob(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:
         goal_q = 0.9 if on else fr["range"][0] - 0.05
         boxes = env.joint_part_boxes(joint)
         grip = boxes[int(np.argmax(boxes[:, 1, 2]))]
-        pos = (grip[0] + grip[1]) / 2 + ctx.noise.grasp_offset() * [0.5, 0.5, 1.0]
+        offset = ctx.noise.grasp_offset() * [0.5, 0.5, 1.0]
+        ctx.begin("turn_on" if on else "turn_off", conjunct, conjunct[1])
+        ctx.note(grasp_offset=offset)
+        pos = (grip[0] + grip[1]) / 2 + offset
         pos[2] = grip[1, 2] - 0.015
         # LIBERO's stove: the grip bar is thin along world x at q = 0, so close along x
         yaw = (np.pi / 2 + spin * q + np.pi / 2) % np.pi - np.pi / 2
@@ -56,3 +59,6 @@ def turn_knob(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:
         yield Grip(-1.0, ctx.open_steps, label="let_go")
         ctx.yaw_hold = yaw + spin * dq
         yield ctx.move(s.eef() + [0, 0, 0.08], yaw=ctx.yaw_hold, tol=0.02, label="retreat")
+        if ctx.truth is not None:
+            q_now = env.joint_frame(joint)["qpos"]
+            ctx.end("achieved" if s.satisfied(conjunct) else "not_turned", f"{joint} at {q_now:.3f}")

@@ -6,6 +6,8 @@ first credits the steps the runner actually executed of the previous chunk to th
 primitive that produced them (the runner may execute fewer than returned), then asks the
 plan for the next unfinished primitive and returns its actions (at most `chunk_len`;
 fewer when a primitive ends, so the next decision sees live state).
+It also keeps the generator's own record (`truth.TruthLog`): the runner reports each
+executed step through `on_step`, and `truth_table()` gives the episode's attempts.
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ from pipeline.policies.scripted.planner import plan_episode
 from pipeline.policies.scripted.primitives import Primitive, emit
 from pipeline.policies.scripted.scene import Scene
 from pipeline.policies.scripted.skills import Ctx, Plan
+from pipeline.policies.scripted.truth import TruthLog
 from pipeline.sim import TaskSpec
 
 
@@ -50,14 +53,18 @@ class ScriptedPolicy:
             raise ValueError(f"policy {self.name}: the scripted expert needs privileged state (obs.sim)")
         if self._plan is None:
             noise = Noise(self.cfg.noise, episode_rng(self._seed, self._task_id or env.task.task_id))
-            self._ctx = Ctx(scene=Scene(env), noise=noise, max_attempts=self.cfg.max_attempts)
+            scene = Scene(env)
+            truth = TruthLog(scene, self.cfg.noise.action_noise, noise.speed)
+            self._ctx = Ctx(scene=scene, noise=noise, max_attempts=self.cfg.max_attempts, truth=truth)
             self._plan = plan_episode(self._ctx)
         if self._last is not None:
             prim, n, step0 = self._last
             prim.steps += max(0, min(obs.step - step0, n))
         eef, rot = env.eef_pose()
+        self._ctx.truth.step = obs.step  # skills resumed now act (and are recorded) at this step
         while self._prim is None or self._prim.done(eef, rot):
             self._prim = next(self._plan)
+            self._ctx.truth.mark(self._prim.label)
         chunk = emit(self._prim, eef, rot, self.cfg.chunk_len, self._ctx.yaw_hold, self._ctx.approach_hold)
         chunk = self._ctx.noise.actions(chunk)
         self._last = (self._prim, len(chunk), obs.step)
@@ -72,6 +79,15 @@ class ScriptedPolicy:
     def events(self) -> list[str]:
         """What went wrong so far this episode (missed grasps, drops, misplacements)."""
         return list(self._ctx.events) if self._ctx is not None else []
+
+    def on_step(self, step: int, action: np.ndarray) -> None:
+        """Called by the runner's recorder after each executed step: the truth log's trace."""
+        if self._ctx is not None and self._ctx.truth is not None:
+            self._ctx.truth.watch(step, action)
+
+    def truth_table(self):
+        """This episode's attempts (`truth.TRUTH_SCHEMA`), or None before the first act."""
+        return self._ctx.truth.table() if self._ctx is not None and self._ctx.truth is not None else None
 
     def params(self) -> dict:
         return {"kind": "scripted", **self.cfg.model_dump(mode="json")}

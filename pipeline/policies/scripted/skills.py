@@ -21,6 +21,7 @@ from pipeline.policies.scripted.grasps import plan_grasp
 from pipeline.policies.scripted.noise import Noise
 from pipeline.policies.scripted.primitives import Grip, Move, Primitive
 from pipeline.policies.scripted.scene import Scene
+from pipeline.policies.scripted.truth import TruthLog
 
 Plan = Iterator[Primitive]
 HAND_CLEARANCE = 0.07  # grip site above obstacles when the hand moves empty
@@ -38,6 +39,19 @@ class Ctx:
     yaw_hold: float = 0.0  # hand yaw while carrying (the yaw it grasped with)
     approach_hold: np.ndarray | None = None  # set while the hand is tilted (drawer handles)
     events: list[str] = field(default_factory=list)  # what went wrong, in order (for reports)
+    truth: TruthLog | None = None  # the generator's own record (None: not recorded)
+
+    def note(self, **noise) -> None:
+        if self.truth is not None:
+            self.truth.note(**noise)
+
+    def begin(self, skill: str, conjunct: tuple[str, ...], target: str, reference: str | None = None) -> None:
+        if self.truth is not None:
+            self.truth.begin(skill, conjunct, target, reference)
+
+    def end(self, outcome: str, detail: str = "") -> None:
+        if self.truth is not None:
+            self.truth.end(outcome, detail)
 
     def move(self, target, speed: float = 1.0, **kw) -> Move:
         t = np.asarray(target, dtype=float).copy()
@@ -66,12 +80,15 @@ def free_hand(ctx: Ctx) -> Plan:
 def grasp(ctx: Ctx, obj: str, dest: np.ndarray | None = None) -> Plan:
     s = ctx.scene
     g = plan_grasp(s, obj, dest)
-    pos = g.pos + ctx.noise.grasp_offset()
+    offset = ctx.noise.grasp_offset()
+    ctx.note(grasp_offset=offset)
+    pos = g.pos + offset
     lift_z = s.path_clearance(s.eef(), pos, 0.06, {obj}) + HAND_CLEARANCE
     hover = pos + [0, 0, 0.08]
     yield from travel(ctx, hover, g.yaw, -1.0, lift_z)
     yield ctx.move(hover, yaw=g.yaw, tol=0.012, label="hover")
     t = ctx.noise.timing()
+    ctx.note(grasp_timing=t)
     early = {"switch_gripper": 1.0, "switch_dist": 0.005 * -t} if t < 0 else {}
     yield ctx.move(pos, speed=0.5, yaw=g.yaw, tol=0.007, max_steps=50, label="descend", **early)
     ctx.yaw_hold = g.yaw
@@ -107,22 +124,28 @@ def place(ctx: Ctx, obj: str, target: str) -> Plan:
     hold = eef - body  # grip site relative to the object body, kept while carrying
     bottom = eef[2] - box.lo[2]  # grip site above the object's bottom
     radius = 0.6 * float(min(box.size[0], box.size[1])) / 2
-    dest = place_xy(ctx, obj, target) + ctx.noise.place_offset()[:2]
+    offset_xy = ctx.noise.place_offset()[:2]
+    dest = place_xy(ctx, obj, target) + offset_xy
     foot = dest + (box.centre[:2] - body[:2])
     below = np.inf
     if env.is_region(target):
         r = env.region(target)
         below = r["pos"][2] + float(np.abs(r["mat"] @ r["size"])[2]) + 0.03
     support = s.support_top(foot, radius, {obj}, below=below)
-    release_z = support + 0.015 + bottom + abs(ctx.noise.place_offset()[2])
+    offset_z = abs(ctx.noise.place_offset()[2])
+    ctx.note(place_offset=[offset_xy[0], offset_xy[1], offset_z])
+    release_z = support + 0.015 + bottom + offset_z
     lift_z = s.path_clearance(box.centre, foot, radius, {obj}) + CARRY_CLEARANCE + bottom
     goal = np.array([dest[0] + hold[0], dest[1] + hold[1], release_z])
     yaw = ctx.yaw_hold
     yield from travel(ctx, goal, yaw, 1.0, max(lift_z, release_z + 0.05))
     if s.holding_any() != obj:
         ctx.events.append(f"dropped:{obj}")
+        if ctx.truth is not None:
+            ctx.truth.end_hand(obj, False)
         return
     t = ctx.noise.timing()
+    ctx.note(release_timing=t)
     early = {"switch_gripper": -1.0, "switch_dist": 0.006 * -t} if t < 0 else {}
     yield ctx.move(goal, gripper=1.0, speed=0.5, yaw=yaw, tol=0.01, max_steps=60, label="lower", **early)
     yield Grip(-1.0, ctx.open_steps + max(t, 0), label="open")
@@ -135,12 +158,17 @@ def pick_place(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:
     for _ in range(ctx.max_attempts):
         if s.satisfied(conjunct):
             return
+        ctx.begin("pick_place", conjunct, obj, target)
         if s.holding_any() != obj:
             yield from free_hand(ctx)
             yield from grasp(ctx, obj, destination(ctx, obj, target))
             if s.holding_any() != obj:
                 ctx.events.append(f"missed_grasp:{obj}")
+                if ctx.truth is not None:  # held for a while, then gone: a lost grasp, not a miss
+                    ctx.truth.end_hand(obj, False)
                 continue
         yield from place(ctx, obj, target)
+        if ctx.truth is not None:  # a no-op when place already ended the attempt
+            ctx.truth.end_hand(obj, s.satisfied(conjunct))
         if not s.satisfied(conjunct) and s.holding_any() != obj:
             ctx.events.append(f"misplaced:{obj}")

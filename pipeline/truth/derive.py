@@ -1,0 +1,165 @@
+"""Ground truth of a failed episode, derived from the scripted generator's own record.
+
+Input: an episode's `truth.parquet` (`pipeline.policies.scripted.truth.TRUTH_SCHEMA`: one
+row per skill attempt, with its outcome, decisive event and the scene change after it).
+Output: an `EpisodeTruth`: onset step and time, expected category and recovery level.
+Only episodes that failed have a truth; the openpi generator writes no record, and nothing
+else in the pipeline reads one.
+
+Rules:
+- Attempt: the first attempt (in execution order) whose outcome is not `achieved`. Later
+  attempts are retries or other subgoals; the label describes the first thing that went
+  wrong. No such attempt (every attempt achieved its subgoal, the goal fell apart later, or
+  the episode ended before the next skill started) -> no truth, reason `no_failed_attempt`;
+  a first failed attempt that only ran out of time made no mistake to localize -> no
+  truth, reason `timeout`. Both are counted in the benchmark's set-aside reasons.
+- Onset: that attempt's decisive event step (its meaning per outcome is in the record's
+  module docstring): the gripper closing off target (missed_grasp), the state the object
+  left the closed hand (lost_grasp), the opening that released it (dropped, misplaced), the
+  first motion of the object the contact displaced (knocked), the hand letting go of a part
+  left half open / a knob not turned (half_open, not_turned).
+- Category (the project's six, `records.Category`):
+  missed_grasp, lost_grasp                  -> grasp_failure
+  dropped                                   -> placement_failure if released within
+                                               PLACE_NEAR_M (xy) of the reference, else
+                                               grasp_failure (a drop in transit)
+  misplaced                                 -> placement_failure
+  knocked                                   -> object_displacement if the displaced object
+                                               is a goal target, else
+                                               collision_or_interaction_failure
+  half_open, not_turned                     -> collision_or_interaction_failure
+  anything else                             -> other
+  (environmental_obstruction is never expected: the generator does not know when a
+  fixture blocked it.)
+- Level: the taxonomy (annotations/README.md) applied to the privileged scene change from
+  the onset to the end of that attempt (`changes`), first rule that matches:
+  L4 environmental recovery: an object that is neither a goal target nor a reference moved
+     >= MOVED_M (or toppled) and ends within OBSTRUCT_M (xy) of a target or reference;
+  L3 object state recovery: a goal target toppled (tilt >= TOPPLE_DEG), fell off the table,
+     or moved >= FAR_M and is not held;
+  L2 action adaptation: any object moved >= MOVED_M or tilted >= TILT_DEG more;
+  L1 action retry: nothing changed (a missed grasp, a knob not turned).
+  The thresholds are the taxonomy's, fixed here on purpose: tuning the simstate rules
+  must not move the truth they are scored against.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pyarrow.parquet as pq
+
+from pipeline.evidence import goal_roles
+from pipeline.records import Category, Level, Record
+
+MOVED_M, FAR_M, OBSTRUCT_M, PLACE_NEAR_M = 0.01, 0.05, 0.15, 0.10
+TILT_DEG, TOPPLE_DEG = 10.0, 45.0
+_REQUIRED = ("attempt", "outcome", "event_step", "target", "changes", "knocked")
+
+
+class EpisodeTruth(Record):
+    key: str
+    onset_step: int
+    onset_time_s: float
+    category: str  # a records.Category value
+    level: str  # a records.Level value
+    outcome: str  # outcome of the first failed attempt
+    attempt: int
+    skill: str
+    event: str
+    event_object: str | None = None
+    detail: str = ""
+
+
+class TruthError(ValueError):
+    """An unusable truth record; `reason` is counted, the message names the file."""
+
+    def __init__(self, reason: str, message: str):
+        super().__init__(message)
+        self.reason = reason
+
+
+def read_truth(path: str | Path) -> tuple[list[dict], dict]:
+    """Rows (in attempt order) and metadata of a truth.parquet; TruthError naming the file."""
+    path = Path(path)
+    if not path.is_file():
+        raise TruthError("no_truth", f"{path}: no such file (only the scripted generator writes one)")
+    try:
+        table = pq.read_table(path)
+    except Exception as e:  # noqa: BLE001 - any unreadable file is one bad input
+        raise TruthError("bad_truth", f"{path}: not a parquet file ({type(e).__name__}: {e})") from None
+    missing = [c for c in _REQUIRED if c not in table.column_names]
+    if missing:
+        raise TruthError("bad_truth", f"{path}: missing column(s) {missing}")
+    raw = (table.schema.metadata or {}).get(b"truth")
+    meta = json.loads(raw) if raw else {}
+    if meta.get("error"):
+        raise TruthError("truth_error", f"{path}: the generator's recording failed: {meta['error']}")
+    return sorted(table.to_pylist(), key=lambda r: r["attempt"]), meta
+
+
+def category_of(row: dict, targets: list[str]) -> Category:
+    o = row["outcome"]
+    if o in ("missed_grasp", "lost_grasp"):
+        return Category.grasp_failure
+    if o == "dropped":
+        d = row.get("release_dist_m")
+        return Category.placement_failure if d is not None and d <= PLACE_NEAR_M else Category.grasp_failure
+    if o == "misplaced":
+        return Category.placement_failure
+    if o == "knocked":
+        return Category.object_displacement if row.get("event_object") in targets else \
+            Category.collision_or_interaction_failure
+    if o in ("half_open", "not_turned"):
+        return Category.collision_or_interaction_failure
+    return Category.other
+
+
+def level_of(changes: list[dict], targets: list[str], references: list[str]) -> Level:
+    ch = {c["object"]: c for c in changes}
+    focus = [o for o in targets + references if o in ch]
+    for o, c in ch.items():
+        if o in targets or o in references:
+            continue
+        toppled = c["tilt_deg"] >= TOPPLE_DEG > c["tilt_deg"] - c["tilt_gain_deg"]
+        if c["moved_m"] >= MOVED_M or toppled:
+            xy = np.asarray(c["position"][:2])
+            if any(np.linalg.norm(xy - np.asarray(ch[f]["position"][:2])) <= OBSTRUCT_M for f in focus):
+                return Level.L4
+    for o in targets:
+        c = ch.get(o)
+        if c and (c["tilt_deg"] >= TOPPLE_DEG or c["fell_off"] or (c["moved_m"] >= FAR_M and not c["held"])):
+            return Level.L3
+    if any(c["moved_m"] >= MOVED_M or c["tilt_gain_deg"] >= TILT_DEG for c in changes):
+        return Level.L2
+    return Level.L1
+
+
+def derive(key: str, rows: list[dict], meta: dict, control_hz: int = 20) -> EpisodeTruth:
+    """The truth of one failed episode from its attempt rows (TruthError when there is none)."""
+    failed = [r for r in rows if r["outcome"] != "achieved"]
+    if not failed:
+        raise TruthError("no_failed_attempt", f"{key}: every recorded attempt achieved its subgoal")
+    row = failed[0]
+    if row["outcome"] == "timeout":
+        raise TruthError("timeout", f"{key}: attempt {row['attempt']} ran out of time without a mistake: "
+                                    "no onset to score")
+    if row["event_step"] is None:
+        raise TruthError("no_event", f"{key}: attempt {row['attempt']} ({row['outcome']}) has no decisive step")
+    goal = meta.get("goal") or []
+    known = list(meta.get("objects", [])) + list(meta.get("fixtures", []))
+    targets, refs = goal_roles(goal, known)
+    step = int(row["event_step"])
+    return EpisodeTruth(
+        key=key, onset_step=step, onset_time_s=round(step / control_hz, 3),
+        category=category_of(row, targets).value, level=level_of(row["changes"] or [], targets, refs).value,
+        outcome=row["outcome"], attempt=int(row["attempt"]), skill=row["skill"], event=row["event"],
+        event_object=row.get("event_object"), detail=row.get("detail") or "",
+    )
+
+
+def episode_truth(path: str | Path, key: str, control_hz: int = 20) -> EpisodeTruth:
+    rows, meta = read_truth(path)
+    return derive(key, rows, meta, control_hz)

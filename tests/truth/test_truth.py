@@ -1,0 +1,159 @@
+"""The generator's truth of hand-built failures, and `recover bench-localize` scoring against it."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import pyarrow.parquet as pq
+import pytest
+
+from pipeline.truth.bench import Prediction, load_truths, score
+from pipeline.truth.derive import EpisodeTruth, episode_truth, read_truth
+
+def _truth(run, rec):
+    return episode_truth(run / "stage1" / rec.path / "truth.parquet", rec.key, rec.control_hz)
+
+
+@pytest.mark.sim
+@pytest.mark.xdist_group("truth_run")
+def test_stage1_writes_the_truth_beside_the_steps(truth_run):
+    run, eps = truth_run
+    folder = run / "stage1" / eps["miss"].path
+    assert {"states.npy", "steps.parquet", "truth.parquet", "video_agentview.mp4"} <= {p.name for p in folder.iterdir()}
+
+
+@pytest.mark.sim
+@pytest.mark.xdist_group("truth_run")
+def test_a_forced_missed_grasp_has_its_close_command_as_onset(truth_run):
+    run, eps = truth_run
+    rec = eps["miss"]
+    actions = np.asarray(pq.read_table(run / "stage1" / rec.path / "steps.parquet").column("action").to_pylist())
+    first_close = int(np.flatnonzero(actions[:, 6] > 0)[0])  # the expert travels open until then
+    t = _truth(run, rec)
+    assert not rec.success
+    assert (t.outcome, t.category, t.level, t.onset_step) == ("missed_grasp", "grasp_failure", "L1", first_close)
+    rows, _ = read_truth(run / "stage1" / rec.path / "truth.parquet")
+    assert rows[0]["approach_height_m"] == pytest.approx(0.06) and rows[0]["grip_error_m"] > 0.05
+
+
+@pytest.mark.sim
+@pytest.mark.xdist_group("truth_run")
+def test_a_forced_drop_in_transit_has_the_forced_open_as_onset(truth_run):
+    run, eps = truth_run
+    rec, forced = eps["drop"], eps["drop_step"]
+    t = _truth(run, rec)
+    rows, _ = read_truth(run / "stage1" / rec.path / "truth.parquet")
+    assert forced is not None and not rec.success
+    assert (t.outcome, t.event, t.onset_step) == ("dropped", "release", forced)
+    # carried off its spot towards the plate: a drop in transit is a grasp failure
+    assert rows[0]["release_dist_m"] > 0.10 and t.category == "grasp_failure"
+    assert t.level == "L3"  # the bowl fell and lies loose: object state recovery
+
+
+@pytest.mark.sim
+@pytest.mark.xdist_group("truth_run")
+def test_bench_localize_scores_simstate_from_the_cli(truth_run):
+    from typer.testing import CliRunner
+
+    from pipeline.cli import app
+
+    run, _ = truth_run
+    cfg = run / "bench.yaml"
+    cfg.write_text(f"run:\n  output_dir: {run}\n")
+    res = CliRunner().invoke(app, ["bench-localize", "--config", str(cfg), "--localizer", "simstate"])
+    assert res.exit_code == 0, res.output
+    folder = run / "bench" / "localize_simstate"
+    report = json.loads((folder / "report.json").read_text())
+    assert report["truths"] == 2 and report["failed"] == 2
+    assert {r["key"] for r in report["worst"]} == {r["key"] for r in report["episodes"]}
+    assert (folder / "confusion_level.png").stat().st_size > 1000 and (folder / "confusion_category.png").is_file()
+    assert "| onset MAE |" in (folder / "report.md").read_text()
+
+
+@pytest.mark.sim
+@pytest.mark.xdist_group("truth_run")
+def test_the_openai_backend_goes_through_bench_localize_over_loopback(truth_run, tmp_path):
+    from pipeline.config import Config
+    from pipeline.truth.bench import run as bench
+    from tests.vlm.loopback_server import LoopbackServer
+
+    run, eps = truth_run
+    miss = _truth(run, eps["miss"])
+    answer = json.dumps({"fail": miss.onset_time_s + 2.0, "recovery_level": "L1",
+                         "failure_category": "grasp_failure", "recovery_action": "Pick the bowl up again"})
+    with LoopbackServer(answer=answer) as srv:
+        cfg = Config.model_validate({"run": {"output_dir": str(run)}, "stage2": {"vlm": {
+            "backend": "openai", "language": "en",
+            "openai": {"base_url": srv.base_url, "model": "ok", "max_retries": 0}}}})
+        report = bench(cfg, "openai", tmp_path / "bench")
+    assert len(srv.seen) == 4  # localize, then characterize, per episode
+    by_key = {r["key"]: r for r in report["episodes"]}
+    assert by_key[miss.key]["error_s"] == pytest.approx(2.0, abs=0.06)
+    assert report["characterized"] == 2 and by_key[miss.key]["pred_category"] == "grasp_failure"
+    assert (tmp_path / "bench" / "report.md").is_file()
+
+
+@pytest.mark.sim
+@pytest.mark.xdist_group("truth_run")
+def test_failed_episodes_without_a_truth_are_set_aside_with_the_reason(truth_run, tmp_path):
+    run, eps = truth_run
+    copy = tmp_path / "run"
+    shutil.copytree(run / "stage1", copy / "stage1")
+    (copy / "stage1" / eps["drop"].path / "truth.parquet").unlink()  # as an openpi episode has none
+    failed, truths, aside = load_truths(copy)
+    assert len(failed) == 2 and list(truths) == [eps["miss"].key]
+    assert aside[eps["drop"].key].startswith("no_truth") and "truth.parquet" in aside[eps["drop"].key]
+
+
+def _truths(n: int) -> dict[str, EpisodeTruth]:
+    return {f"s/t/e{i}": EpisodeTruth(key=f"s/t/e{i}", onset_step=20 + 7 * i, onset_time_s=(20 + 7 * i) / 20,
+                                      category="grasp_failure", level="L1", outcome="missed_grasp", attempt=0,
+                                      skill="pick_place", event="close") for i in range(n)}
+
+
+def test_a_localizer_off_by_2_s_scores_0_within_1_s():
+    truths = _truths(6)
+    late = {k: Prediction(k, t.onset_step + 40, "L1", "grasp_failure") for k, t in truths.items()}
+    r = score(truths, late)
+    assert (r["within_1s"], r["within_0_5s"], r["onset_mae_s"]) == (0.0, 0.0, 2.0)
+    assert (r["before_truth"], r["at_truth"], r["after_truth"]) == (0, 0, 6)
+    assert r["level_accuracy"] == r["category_accuracy"] == 1.0
+    early = {k: Prediction(k, t.onset_step - 40) for k, t in truths.items()}
+    assert score(truths, early)["within_1s"] == 0.0 and score(truths, early)["before_truth"] == 6
+
+
+def test_an_exact_localizer_scores_all_within_and_misses_count_against_it():
+    truths = _truths(4)
+    preds = {k: Prediction(k, t.onset_step, "L2", "placement_failure") for k, t in list(truths.items())[:3]}
+    r = score(truths, preds)
+    assert (r["within_0_5s"], r["localized"], r["unlocalized"]) == (0.75, 3, 1)
+    assert r["level_accuracy"] == 0.0 and r["level_confusion"]["L1"] == {"L1": 0, "L2": 3, "L3": 0, "L4": 0, "none": 1}
+    assert r["worst"][0]["error_s"] is None  # a miss is the worst case
+
+
+@pytest.mark.sim
+@pytest.mark.xdist_group("truth_run")
+def test_the_transformers_backend_goes_through_bench_localize_with_a_tiny_qwen(truth_run, tmp_path):
+    import importlib.util
+
+    if not all(importlib.util.find_spec(m) for m in ("transformers", "torchvision", "torch")):
+        pytest.skip("the `vlm` extra (torch, torchvision, transformers) is not installed")
+    from pipeline.vlm.torch_compat import ensure_torchvision
+
+    ensure_torchvision()
+    from pipeline.config import Config
+    from pipeline.truth.bench import run as bench
+    from tests.vlm.tiny_qwen import build_tiny_qwen
+
+    run, _ = truth_run
+    model = build_tiny_qwen(tmp_path / "qwen", "qwen2_5_vl")
+    cfg = Config.model_validate({"run": {"output_dir": str(run)}, "stage2": {"vlm": {
+        "backend": "transformers", "language": "en",
+        "transformers": {"model_path": str(model), "max_new_tokens": 16}}}})
+    report = bench(cfg, "transformers", tmp_path / "bench")
+    # random weights answer nonsense: every episode is scored as a miss, with the parser's reason
+    assert report["truths"] == 2 and report["localizer"] == "transformers"
+    assert report["localized"] + sum(report["unlocalized_reasons"].values()) == 2
+    assert (tmp_path / "bench" / "report.json").is_file()
