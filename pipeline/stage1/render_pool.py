@@ -20,6 +20,7 @@ dies with its worker (PR_SET_PDEATHSIG).
 
 from __future__ import annotations
 
+import atexit
 import multiprocessing as mp
 import os
 import queue as queue_mod
@@ -87,6 +88,7 @@ class RenderProcess:
         self._model_ref = None  # keeps the model alive so its id is not reused
         self._outstanding: list[str] = []
         self._names = count()
+        atexit.register(self.close)  # a model file the process never loaded must not stay in /dev/shm
 
     @property
     def alive(self) -> bool:
@@ -136,6 +138,7 @@ class RenderProcess:
         return out
 
     def close(self) -> None:
+        """Stop the process (after the jobs it has) and remove this worker's model files."""
         if self.alive:
             self._jobs.put(None)
             self._proc.join(timeout=10)
