@@ -63,7 +63,7 @@ def test_render_process_writes_the_same_bytes_as_rendering_in_the_worker(tmp_pat
 
 
 @pytest.mark.sim
-def test_an_episode_whose_render_process_died_is_left_unmarked_and_the_next_is_served(tmp_path, monkeypatch):
+def test_an_episode_whose_render_process_died_is_left_unmarked_redone_on_rerun_and_the_next_is_served(tmp_path, monkeypatch):
     cfg = _cfg(tmp_path, init_states=(4, 5))
     units = plan_units(cfg)
     stage1 = tmp_path / "stage1"
@@ -88,3 +88,6 @@ def test_an_episode_whose_render_process_died_is_left_unmarked_and_the_next_is_s
     assert done.is_done(second.unit_id)  # a fresh render process took the next episode
     assert np.load(stage1 / second.rel_dir / "states.npy").shape[0] == 14
     assert sorted(e["kind"] for e in events) == ["episode", "error"]
+    # the rerun redoes the unmarked episode only, videos included
+    assert run_shard((shard, cfg.model_dump(mode="json"), str(stage1), make), events.append) == 1
+    assert done.is_done(first.unit_id) and (stage1 / first.rel_dir / "video_agentview.mp4").exists()
