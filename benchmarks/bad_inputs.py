@@ -5,7 +5,7 @@ SQLite, `recover verify`, a rendering process, torch_compat, the transformers ba
 tiny Qwen, `recover stage2` on real rollouts, `recover stage3` on a sample run) the input
 that broke the landed code, and prints `handled: <what it did>`. A case that raises or
 misbehaves prints `NOT HANDLED: ...`; the exit status is the number of those.
-Cases not built yet print `open: ...` (slots for the executor and no-op revision work).
+Cases not built yet print `open: ...` (the slot for the no-op revision).
 
     MUJOCO_GL=egl .venv/bin/python benchmarks/bad_inputs.py [--only SUBSTRING] [--skip-slow]
 """
@@ -199,6 +199,31 @@ def _(tmp):
     return f"files {modes}; docs {docs[0]}/{docs[1]} without sign-in; deactivated token -> {refused}"
 
 
+@case("review: a revision that changes nothing (fail_time_s: \"5\" when it is 5)")
+def _(tmp):
+    import httpx
+    from sqlalchemy import select
+
+    from pipeline.review.db import Event, Review, read_session
+
+    server, items, tokens, engine, _ = _review_server(tmp)
+    with server:
+        ann = httpx.Client(base_url=server.url, headers={"Authorization": f"Bearer {tokens['ann']}"})
+        model_t = ann.get(f"/api/items/{items[0]}").json()["proposal"]["fail_time_s"]
+        first = ann.post(f"/api/items/{items[0]}/review", json={
+            "decision": "revise", "version": 0, "idempotency_key": "a", "fields": {"fail_time_s": str(model_t)}}).json()
+        again = ann.post(f"/api/items/{items[0]}/review", json={
+            "decision": "revise", "version": 1, "idempotency_key": "b", "fields": {"fail_time_s": str(model_t)}}).json()
+    with read_session(engine) as s:
+        r = s.scalar(select(Review).where(Review.item_id == items[0]))
+        changed = s.scalars(select(Event.id).where(Event.item_id == items[0], Event.kind == "review_changed")).all()
+    engine.dispose()
+    assert (r.decision, r.edited, r.version, again["replayed"], changed) == ("accept", [], 1, True, []), \
+        (r.decision, r.edited, r.version, again, changed)
+    return (f"the model's time {str(model_t)!r} stored as {first['decision']} (no edit); sent again: replayed, "
+            f"version stays {r.version}, no audit event")
+
+
 # -- verify ---------------------------------------------------------------------------------
 
 
@@ -228,6 +253,84 @@ def _(_tmp):
     """)
     assert out.returncode == 0 and "Exception ignored" not in out.stderr, out.stderr[-800:]
     return "exit 0, no 'Exception ignored in GLContext.__del__' in its output"
+
+
+def _spawned_children() -> list[int]:
+    out = []
+    for task in Path(f"/proc/{os.getpid()}/task").iterdir():
+        for pid in (task / "children").read_text().split():
+            try:
+                if b"spawn_main" in Path(f"/proc/{pid}/cmdline").read_bytes():
+                    out.append(int(pid))
+            except FileNotFoundError:
+                pass
+    return out
+
+
+@case("local executor: kill -9 of one stage-1 worker", slow=True)
+def _(tmp):
+    import io
+    import json
+    import signal
+    import threading
+    import time
+
+    from rich.console import Console
+
+    from pipeline.config import Config
+    from pipeline.stage1.run import run
+
+    cfg = Config.model_validate({
+        "run": {"name": "kill9", "output_dir": str(tmp / "run")},
+        "tasks": {"suites": ["libero_spatial"], "max_tasks_per_suite": 1, "init_states": [0, 1, 2, 3, 4, 5]},
+        "stage1": {"rollout": {"horizon": 40}, "video": {"render": "none"}},
+    })
+    stage1 = tmp / "run" / "stage1"
+    killed = []
+
+    def kill_a_worker_mid_shard() -> None:
+        deadline = time.time() + 300
+        while time.time() < deadline and not list((stage1 / "_done").glob("*.done")):
+            time.sleep(0.05)
+        killed.append(_spawned_children()[0])
+        os.kill(killed[0], signal.SIGKILL)
+
+    killer = threading.Thread(target=kill_a_worker_mid_shard, daemon=True)
+    killer.start()
+    result = run(cfg, console=Console(file=io.StringIO()))
+    killer.join()
+    report = json.loads((stage1 / "summary.json").read_text())["executor"]
+    assert killed and result["done"] == result["planned"] == 6 and not result["errors"], result
+    assert len(report["retried"]) == 1 and not report["set_aside"], report
+    return f"worker pid {killed[0]} killed: its shard retried, {result['done']}/6 episodes done once"
+
+
+@case("Ray executor: a worker node removed mid-run", slow=True)
+def _(tmp):
+    from ray.cluster_utils import Cluster
+
+    from pipeline.executors.ray import RayExecutor
+    from tests.executors.work_fns import slow_write
+
+    cluster = Cluster(initialize_head=True, head_node_args={"num_cpus": 0})  # tasks only on worker nodes
+    try:
+        _, doomed = [cluster.add_node(num_cpus=1, resources={n: 1}) for n in ("node_a", "node_b")]
+        cluster.wait_for_nodes()
+        names = [f"u{i}" for i in range(6)]
+        seen = []
+
+        def on_event(ev) -> None:
+            if ev["node"] == doomed.node_id and not seen:
+                seen.append(ev["item"])
+                cluster.remove_node(doomed)
+
+        ex = RayExecutor(workers=2, address=cluster.address, worker_env={"PYTHONPATH": str(REPO)})
+        results = ex.run(slow_write, [(str(tmp / "out"), n, 1.0) for n in names], on_event)
+    finally:
+        cluster.shutdown()
+    files = sorted(p.name for p in (tmp / "out").iterdir() if not p.name.startswith("."))
+    assert seen and results == names == files and not ex.report.set_aside, (seen, results, files)
+    return f"node removed under {seen[0]}: {len(ex.report.retried)} task(s) resubmitted, 6/6 outputs, none twice"
 
 
 # -- the VLM path on a GPU machine ----------------------------------------------------------
@@ -381,13 +484,6 @@ def _(tmp):
     assert second.returncode == 0 and after["set_aside"] == 3 and after.get("characterized") == 1, after
     return (f"exit 0, 4 set aside ({', '.join(reasons)}), all 5 items answer 200; "
             "the corrected file was read again and queued with its value")
-
-
-# -- slots: handled by other changes -------------------------------------------------------
-
-slot("local executor: kill -9 of one stage-1 worker", "executors")
-slot("Ray executor: a worker node removed mid-run", "executors")
-slot("review: a revision that changes nothing", "issue 13")
 
 
 def main() -> int:

@@ -154,7 +154,10 @@ class PolicyConfig(_Strict):
 
 
 class VideoConfig(_Strict):
-    cameras: list[Literal["agentview", "robot0_eye_in_hand"]] = Field(default_factory=lambda: ["agentview"])
+    # the review page shows both views side by side; 256 px is the smallest size at which
+    # reviewers can tell the scene's objects apart
+    cameras: list[Literal["agentview", "robot0_eye_in_hand"]] = Field(
+        default_factory=lambda: ["agentview", "robot0_eye_in_hand"])
     fps: int = Field(default=4)
     resolution: int = Field(default=256, ge=32, le=1024)
     # render which episodes: failures only (all later stages need) or all of them
@@ -175,6 +178,9 @@ class ExecutorConfig(_Strict):
     kind: Literal["local", "ray"] = "local"
     workers: int = Field(default=2, ge=1)
     ray_address: str | None = None
+    # times an item is run again after its worker died under it (kill -9, OOM, a lost Ray
+    # node) before it is set aside with the reason; the run itself goes on either way
+    max_retries: int = Field(default=2, ge=0)
 
 
 class Stage1Config(_Strict):
@@ -259,6 +265,8 @@ class Stage3Config(_Strict):
     lease_seconds: int = Field(default=900, ge=10)  # an absent reviewer's hold expires
     host: str = "127.0.0.1"  # `recover review serve` (loopback unless you mean otherwise)
     port: int = Field(default=8765, ge=1, le=65535)
+    # server processes; SQLite writes from all of them queue on one lock file (review/db.py)
+    workers: int = Field(default=2, ge=1, le=64)
 
 
 class ReleaseConfig(_Strict):

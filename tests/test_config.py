@@ -33,6 +33,13 @@ def test_smoke_config_is_small():
     assert cfg.stage1.rollout.horizon < 520
 
 
+@pytest.mark.parametrize("name", sorted(p.name for p in (ROOT / "configs").glob("*.yaml")) + [None])
+def test_every_config_renders_both_review_cameras_at_256_px(name, tmp_path):
+    cfg = load_config(ROOT / "configs" / name) if name else load_config(_write(tmp_path, {"run": {"seed": 0}}))
+    assert cfg.stage1.video.cameras == ["agentview", "robot0_eye_in_hand"]
+    assert cfg.stage1.video.resolution == 256
+
+
 def test_unknown_key_fails_naming_the_file_and_dotted_key(tmp_path):
     p = _write(tmp_path, {"stage1": {"rollout": {"horizn": 10}}})
     with pytest.raises(ConfigError) as e:

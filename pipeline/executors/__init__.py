@@ -2,23 +2,24 @@
 
 Stage code hands an executor a function and a list of picklable work items; the function
 gets `(item, emit)` and may `emit(event)` small picklable events (progress) that reach the
-caller's `on_event` in the main process. Only `ray.py` imports ray, inside its methods.
+caller's `on_event` in the main process. A worker that dies under an item costs that item
+one attempt, never the run (see base.py). Only `ray.py` imports ray, inside its methods.
 """
 
 from __future__ import annotations
 
 from pipeline.config import ExecutorConfig
-from pipeline.executors.base import Executor
+from pipeline.executors.base import Executor, RunReport, SetAside
 
 
 def make_executor(cfg: ExecutorConfig, worker_env: dict[str, str] | None = None) -> Executor:
     if cfg.kind == "ray":
         from pipeline.executors.ray import RayExecutor
 
-        return RayExecutor(cfg.workers, cfg.ray_address, worker_env=worker_env)
+        return RayExecutor(cfg.workers, cfg.ray_address, worker_env=worker_env, max_retries=cfg.max_retries)
     from pipeline.executors.local import LocalExecutor
 
-    return LocalExecutor(cfg.workers, worker_env=worker_env)
+    return LocalExecutor(cfg.workers, worker_env=worker_env, max_retries=cfg.max_retries)
 
 
-__all__ = ["Executor", "make_executor"]
+__all__ = ["Executor", "RunReport", "SetAside", "make_executor"]

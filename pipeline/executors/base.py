@@ -1,30 +1,87 @@
 """The executor contract: run `fn(item, emit)` for every item, somewhere, and relay events.
 
 Inputs: a top-level (picklable) function, picklable items, an `on_event` callback.
-Outputs: the functions' return values, in item order.
+Outputs: the functions' return values, in item order; `executor.report` says what was retried.
 Invariants: `on_event` runs in the calling process only; an exception raised by `fn`
 stops the run and is re-raised by `run` (per-item errors that should not stop a run are
 the function's business: catch them and emit/return them); workers never outlive the
 caller (a killed caller leaves no worker behind writing files).
+
+Faults are not exceptions: a worker that dies under an item (kill -9, OOM killer, segfault,
+a lost Ray node) costs only that item an attempt. It is run again, up to `max_retries` more
+times; after that its result slot holds a `SetAside` record with the reason and the run
+goes on. Every other item completes. So `fn` may run more than once for an item, and must
+write its outputs atomically (pipeline/atomic.py) so a retry never duplicates them.
 """
 
 from __future__ import annotations
 
+import logging
 import os
 from abc import ABC, abstractmethod
 from collections.abc import Callable
 from typing import Any
 
+from pydantic import BaseModel
+
+log = logging.getLogger("pipeline.executors")
+
 Emit = Callable[[Any], None]
 WorkFn = Callable[[Any, Emit], Any]
 
 
+class Retry(BaseModel):
+    """One attempt of an item lost to a dead worker, and run again."""
+
+    item: int  # index into the items list
+    label: str
+    attempt: int  # 1 = the first attempt was lost
+    reason: str
+
+
+class SetAside(BaseModel):
+    """An item whose workers died on every allowed attempt; it stands in for its result."""
+
+    item: int
+    label: str
+    attempts: int
+    reason: str
+
+
+class RunReport(BaseModel):
+    retried: list[Retry] = []
+    set_aside: list[SetAside] = []
+
+    def summary(self) -> str:
+        """One line per retry and per item set aside; empty when nothing went wrong."""
+        lines = [f"retried {r.label} (attempt {r.attempt} lost: {r.reason})" for r in self.retried]
+        lines += [f"set aside {s.label} after {s.attempts} attempt(s): {s.reason}" for s in self.set_aside]
+        if not lines:
+            return ""
+        head = f"executor: {len(self.retried)} attempt(s) lost to dead workers and retried, " \
+               f"{len(self.set_aside)} item(s) set aside"
+        return "\n".join([head] + ["  " + line for line in lines])
+
+    def log(self) -> None:
+        # every caller gets the summary (stderr when logging is not configured); stage 1 also records it
+        if text := self.summary():
+            log.warning(text)
+
+
+def default_label(index: int, _item: Any) -> str:
+    return f"item {index}"
+
+
 class Executor(ABC):
     workers: int
+    max_retries: int = 2
+    report: RunReport = RunReport()  # of the last run
 
     @abstractmethod
-    def run(self, fn: WorkFn, items: list, on_event: Callable[[Any], None] | None = None) -> list:
-        """Run `fn(item, emit)` for each item; return results in item order."""
+    def run(self, fn: WorkFn, items: list, on_event: Callable[[Any], None] | None = None,
+            label: Callable[[int, Any], str] = default_label) -> list:
+        """Run `fn(item, emit)` for each item; return results in item order (a `SetAside` for
+        an item whose workers kept dying); `label(index, item)` names items in the report."""
 
 
 def die_with_parent() -> None:

@@ -104,7 +104,8 @@ def _validated(item: Item, fields: dict, exclude: bool, cfg: QueueSettings) -> d
     if missing:
         raise Invalid(f"{missing[0]}: disputed; the adjudication must decide it", field=missing[0])
     duration = (item.context or {}).get("duration_s")
+    hz = (item.context or {}).get("control_hz", cfg.control_hz)
     try:
-        return {f: validate_field(f, fields[f], duration) for f in disputed}
+        return {f: validate_field(f, fields[f], duration, hz) for f in disputed}
     except FieldError as e:
         raise Invalid(str(e), field=e.field) from None

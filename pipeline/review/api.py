@@ -3,7 +3,8 @@
 Inputs: the run folder, a database engine, the queue settings.
 Outputs: a FastAPI app. Routes (all JSON unless noted):
   POST /api/login {token} -> session cookie + csrf      POST /api/logout     GET /api/me
-  GET  /api/queue            POST /api/queue/next       POST /api/items/{id}/lease
+  GET  /api/queue (with `progress`)   GET /api/progress (done today, left, agreement so far)
+  POST /api/queue/next       POST /api/items/{id}/lease
   GET  /api/items/{id}       POST /api/items/{id}/review (accept | revise | flag)
   GET  /api/items/{id}/evidence, /frames                GET  /api/items/{id}/history
   GET  /api/items/{id}/adjudication   POST .../claim    POST .../adjudication
@@ -12,29 +13,39 @@ Invariants: every route but login and the page needs a user (the OpenAPI docs to
 only with `docs=True`); an item's reviews (adjudication, history) stay hidden while they are
 being collected, and whoever has read them can no longer review that episode; writes
 through the cookie need the CSRF header; errors are `{"detail", "field"?, "current"?}` with 401/403/404/409/422;
-a request body that fails the schema is a 422 whose `field` names the bad field.
+a request body that fails the schema is a 422 whose `field` names the bad field, and no
+error repeats a secret (a token field, a whole body, a long value); sign-in takes JSON only
+(415 otherwise, before the body is read). Decisions and queue/next write through
+`fastwrite` (short under the SQLite writer lock).
 """
 
 from __future__ import annotations
 
+from contextlib import asynccontextmanager
 from pathlib import Path
 from typing import Literal
 
+import anyio
 from fastapi import Depends, FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import FileResponse, JSONResponse, Response
 from fastapi.staticfiles import StaticFiles
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+from starlette.concurrency import run_in_threadpool
 from sqlalchemy import select
 from sqlalchemy.engine import Engine
 
 from pipeline.records import Category, Level
-from pipeline.review import adjudication, audit, auth, media, views, workflow
+from pipeline.review import adjudication, audit, auth, fastwrite, media, views, workflow
 from pipeline.review.db import COLLECTING, Item, Review, read_session, write_session
 from pipeline.review.errors import Forbidden, NotFound, ReviewError
 from pipeline.review.workflow import QueueSettings
 
 UI_DIR = Path(__file__).resolve().parents[2] / "review_ui"
+# request threads per server process, for page loads and for the two writes of every item;
+# measured with benchmarks/review_load.py (2, 8 and 16 were no better than 4 on 2 cores)
+REQUEST_THREADS = 4
+WRITE_THREADS = 4
 
 
 class FieldsIn(BaseModel):
@@ -73,41 +84,98 @@ def _edits(f: FieldsIn | None) -> dict:
     return {} if f is None else f.model_dump(mode="json", exclude_unset=True)
 
 
+SECRET_FIELDS = {"token", "csrf", "password"}
+
+
+def _echo(field: str, value) -> str:
+    """What of a rejected input an error may repeat: numbers and short words of non-secret
+    fields; never a whole body (it may hold a token) nor a secret field."""
+    if field in SECRET_FIELDS or field == "body":
+        return ""
+    if isinstance(value, (bool, int, float)) or value is None:
+        return f" (got {value!r})"
+    if isinstance(value, str) and len(value) <= 40:
+        return f" (got {value!r})"
+    return ""
+
+
 def _validation_error(_req: Request, exc: RequestValidationError) -> JSONResponse:
     errors = []
     for e in exc.errors():
         loc = [str(p) for p in e["loc"] if p not in ("body",)]
         field = next((p for p in reversed(loc) if not p.isdigit()), "body")
-        got = f" (got {e['input']!r})" if "input" in e and not isinstance(e["input"], dict) else ""
+        got = _echo(field, e["input"]) if "input" in e else ""
         errors.append({"field": field, "path": ".".join(loc), "msg": f"{field}: {e['msg']}{got}"})
     first = errors[0] if errors else {"field": "body", "msg": "invalid request"}
     return JSONResponse(status_code=422, content={"detail": first["msg"], "field": first["field"], "errors": errors})
 
 
+_HEADERS = [
+    (b"x-content-type-options", b"nosniff"),
+    (b"referrer-policy", b"same-origin"),
+    (b"content-security-policy", b"default-src 'self'; img-src 'self' data:; style-src 'self' 'unsafe-inline'; "
+                                 b"frame-ancestors 'none'; form-action 'self'"),
+]
+
+
+class SecurityHeaders:
+    """Adds the security headers to every response (a plain ASGI middleware: Starlette's
+    `@app.middleware("http")` costs a task group and a stream per request)."""
+
+    def __init__(self, app):
+        self.app = app
+
+    async def __call__(self, scope, receive, send):
+        if scope["type"] != "http":
+            return await self.app(scope, receive, send)
+
+        async def send_with_headers(message):
+            if message["type"] == "http.response.start":
+                names = {k.lower() for k, _ in message.get("headers", [])}
+                message["headers"] = list(message.get("headers", [])) + [h for h in _HEADERS if h[0] not in names]
+            await send(message)
+
+        await self.app(scope, receive, send_with_headers)
+
+
 def create_app(run_dir: str | Path, engine: Engine, settings: QueueSettings, ui_dir: Path = UI_DIR,
                docs: bool = False) -> FastAPI:
     run_dir = Path(run_dir).resolve()
+
+    @asynccontextmanager
+    async def lifespan(_app):
+        # few request threads per process: with dozens runnable, the one holding the SQLite
+        # writer lock waits for the GIL behind the others and every writer queues longer
+        # (requests beyond these wait, without CPU, in the event loop)
+        anyio.to_thread.current_default_thread_limiter().total_tokens = REQUEST_THREADS
+        yield
+
+    limiters: dict = {}
+
+    def writers() -> anyio.CapacityLimiter:
+        # the two writes of every item (queue/next, decision) get threads of their own, so a
+        # decision never waits for a thread behind page loads (made lazily: a limiter
+        # belongs to the running event loop)
+        if "w" not in limiters:
+            limiters["w"] = anyio.CapacityLimiter(WRITE_THREADS)
+        return limiters["w"]
+
     # FastAPI's own docs routes answer anyone; ours (below, with docs=True) need a user
-    app = FastAPI(title="libero-recover review", docs_url=None, redoc_url=None, openapi_url=None)
+    app = FastAPI(title="libero-recover review", docs_url=None, redoc_url=None, openapi_url=None, lifespan=lifespan)
     app.add_exception_handler(RequestValidationError, _validation_error)
     app.add_exception_handler(ReviewError, lambda _r, e: JSONResponse(status_code=e.status, content=e.body()))
 
-    @app.middleware("http")
-    async def security_headers(request: Request, call_next):
-        resp = await call_next(request)
-        resp.headers.setdefault("X-Content-Type-Options", "nosniff")
-        resp.headers.setdefault("Referrer-Policy", "same-origin")
-        resp.headers.setdefault("Content-Security-Policy", "default-src 'self'; img-src 'self' data:; "
-                                "style-src 'self' 'unsafe-inline'; frame-ancestors 'none'; form-action 'self'")
-        return resp
+    app.add_middleware(SecurityHeaders)
 
-    def who(request: Request) -> auth.Principal:
+    async def who(request: Request) -> auth.Principal:
+        # in the event loop, not a worker thread: a sub-millisecond indexed read (WAL readers
+        # never wait for writers) costs less than the hop to a thread and back
         header = request.headers.get("authorization", "")
         bearer = header[7:].strip() if header.lower().startswith("bearer ") else None
         return auth.authenticate(engine, request.method, bearer, request.cookies.get(auth.COOKIE),
                                  request.headers.get(auth.CSRF_HEADER))
 
-    def adjudicator(p: auth.Principal = Depends(who)) -> auth.Principal:
+    async def adjudicator(p: auth.Principal = Depends(who)) -> auth.Principal:
         auth.require_role(p.user, "adjudicator")
         return p
 
@@ -123,11 +191,21 @@ def create_app(run_dir: str | Path, engine: Engine, settings: QueueSettings, ui_
             return get_swagger_ui_html(openapi_url="/api/openapi.json", title=app.title)
 
     @app.post("/api/login")
-    def login(body: LoginIn, request: Request):
-        # JSON only: a cross-site form cannot send it without a CORS preflight (login CSRF)
-        if not request.headers.get("content-type", "").startswith("application/json"):
-            return JSONResponse(status_code=415, content={"detail": "send JSON"})
-        user, sid, csrf = auth.sign_in(engine, body.token)
+    async def login(request: Request):
+        # JSON only: a cross-site form cannot send it without a CORS preflight (login CSRF).
+        # The type is checked before the body is parsed, and no answer repeats the body: it
+        # holds a personal token
+        if request.headers.get("content-type", "").split(";")[0].strip().lower() != "application/json":
+            return JSONResponse(status_code=415, content={"detail": "send JSON: Content-Type: application/json",
+                                                          "field": "content-type"})
+        try:
+            body = LoginIn.model_validate_json(await request.body())
+        except ValidationError as e:
+            field = next((str(p) for err in e.errors() for p in reversed(err["loc"])), "body")
+            return JSONResponse(status_code=422, content={"detail": f"{field}: expected a JSON object "
+                                                                    '{"token": "<your personal token>"}',
+                                                          "field": field})
+        user, sid, csrf = await run_in_threadpool(auth.sign_in, engine, body.token)
         resp = JSONResponse({"user": user.name, "role": user.role, "csrf": csrf})
         resp.set_cookie(auth.COOKIE, sid, max_age=auth.SESSION_SECONDS, httponly=True, samesite="strict",
                         secure=request.url.scheme == "https", path="/")
@@ -150,13 +228,19 @@ def create_app(run_dir: str | Path, engine: Engine, settings: QueueSettings, ui_
     @app.get("/api/queue")
     def queue(p: auth.Principal = Depends(who)):
         with read_session(engine) as s:
-            return JSONResponse(views.queue(s, p.user, auth.rank(p.user.role) >= auth.rank("adjudicator")))
+            out = views.queue(s, p.user, auth.rank(p.user.role) >= auth.rank("adjudicator"))
+            out["progress"] = views.progress(s, p.user, settings.time_tolerance_s, settings.control_hz)
+            return JSONResponse(out)
+
+    @app.get("/api/progress")
+    def progress(p: auth.Principal = Depends(who)):
+        with read_session(engine) as s:
+            return JSONResponse(views.progress(s, p.user, settings.time_tolerance_s, settings.control_hz))
 
     @app.post("/api/queue/next")
-    def next_item(p: auth.Principal = Depends(who)):
-        with write_session(engine) as s:
-            item = workflow.lease_next(s, p.user, settings)
-            return {"item": item.id if item is not None else None}
+    async def next_item(p: auth.Principal = Depends(who)):
+        item = await anyio.to_thread.run_sync(fastwrite.next_item, engine, p.user, settings, limiter=writers())
+        return JSONResponse({"item": item})
 
     @app.post("/api/items/{item_id}/lease")
     def lease(item_id: int, p: auth.Principal = Depends(who)):
@@ -188,13 +272,11 @@ def create_app(run_dir: str | Path, engine: Engine, settings: QueueSettings, ui_
         return _table(item_id, "frames")
 
     @app.post("/api/items/{item_id}/review")
-    def review(item_id: int, body: DecisionIn, p: auth.Principal = Depends(who)):
+    async def review(item_id: int, body: DecisionIn, p: auth.Principal = Depends(who)):
         payload = {**body.model_dump(mode="json", exclude={"fields"}), "fields": _edits(body.fields)}
-        with write_session(engine) as s:
-            r, replayed = workflow.submit_review(s, p.user, item_id, payload, settings)
-            item = workflow.get_item(s, item_id)
-            return {"replayed": replayed, "version": r.version, "decision": r.decision, "values": r.values,
-                    "state": "open" if item.status in ("pending", "leased", "reviewed") else "closed"}
+        out = await anyio.to_thread.run_sync(fastwrite.decide, engine, p.user, item_id, payload, settings,
+                                             limiter=writers())
+        return JSONResponse(out)
 
     def _reviews_visible(s, p: auth.Principal, item_id: int, whole_episode: bool = False):
         # blindness: nobody reads an item's reviews while they are being collected, nobody

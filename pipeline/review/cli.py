@@ -33,16 +33,17 @@ def _cfg(path: Path):
 def serve(config: Path = CONFIG, host: str = typer.Option(None, help="default: stage3.host"),
           port: int = typer.Option(None, help="default: stage3.port"),
           docs: bool = typer.Option(False, "--docs", help="serve /api/docs and /api/openapi.json (signed in)"),
+          workers: int = typer.Option(None, min=1, help="server processes (default: stage3.workers); "
+                                                         "SQLite stays consistent across them"),
           ) -> None:
     """Serve the review web page and API."""
-    import uvicorn
-
-    from pipeline.review.server import build_app
+    from pipeline.review.server import serve as run_server
 
     cfg = _cfg(config)
     host, port = host or cfg.stage3.host, port or cfg.stage3.port
-    typer.echo(f"review page: http://{host}:{port}/  (run folder {cfg.out})")
-    uvicorn.run(build_app(cfg, docs=docs), host=host, port=port, log_level="info")
+    workers = workers or cfg.stage3.workers
+    typer.echo(f"review page: http://{host}:{port}/  (run folder {cfg.out}, {workers} process(es))")
+    run_server(config, cfg, host, port, workers, docs)
 
 
 @app.command("add-reviewer")

@@ -14,6 +14,7 @@ lock upgrade. Times are UNIX seconds (float).
 
 from __future__ import annotations
 
+import fcntl
 import os
 import threading
 import time
@@ -224,28 +225,69 @@ def read_session(engine: Engine) -> Iterator[Session]:
         yield s
 
 
-_WRITE_LOCKS: dict[int, threading.Lock] = {}
+class _WriterLock:
+    """Writers of one SQLite file queue here: a thread lock within the process, then an
+    exclusive flock on `<db>.lock` across processes (`recover review serve --workers N`).
+
+    SQLite's own busy handler polls with sleeps of up to 100 ms, which under many concurrent
+    writers turns a 5 ms write into a 1 s tail; these locks hand over at once. The busy
+    timeout still guards writers that do not take them (other tools)."""
+
+    def __init__(self, path: Path | None):
+        self.thread = threading.Lock()
+        self.path = path
+        self.fd: int | None = None
+
+    def __enter__(self) -> None:
+        self.thread.acquire()
+        try:
+            if self.path is not None:
+                if self.fd is None:
+                    self.fd = os.open(self.path, os.O_CREAT | os.O_RDWR, 0o600)
+                fcntl.flock(self.fd, fcntl.LOCK_EX)
+        except BaseException:
+            self.thread.release()
+            raise
+
+    def __exit__(self, *exc) -> None:
+        try:
+            if self.fd is not None:
+                fcntl.flock(self.fd, fcntl.LOCK_UN)
+        finally:
+            self.thread.release()
+
+
+_WRITE_LOCKS: dict[tuple[int, str], _WriterLock] = {}
+_WRITE_LOCKS_GUARD = threading.Lock()
+
+
+def _writer_lock(engine: Engine) -> _WriterLock | None:
+    if engine.dialect.name != "sqlite":
+        return None
+    with _WRITE_LOCKS_GUARD:
+        key = (id(engine), str(engine.url))  # the URL too: an id may be reused by a later engine
+        lock = _WRITE_LOCKS.get(key)
+        if lock is None:
+            db = engine.url.database
+            path = Path(db).with_name(Path(db).name + ".lock") if db and db != ":memory:" else None
+            lock = _WRITE_LOCKS[key] = _WriterLock(path)
+        return lock
 
 
 @contextmanager
 def write_session(engine: Engine) -> Iterator[Session]:
-    """One write transaction: committed on success, rolled back on any exception.
-
-    On SQLite, writers of this process also queue on a lock first: SQLite's busy handler
-    polls with sleeps of up to 100 ms, which under many concurrent writers turns a 5 ms
-    write into a 1 s tail; a lock hands over at once. Other processes still meet the
-    busy timeout, so several server processes stay correct, only slower.
-    """
-    lock = _WRITE_LOCKS.setdefault(id(engine), threading.Lock()) if engine.dialect.name == "sqlite" else None
+    """One write transaction (BEGIN IMMEDIATE): committed on success, rolled back on any
+    exception; on SQLite taken under the file's writer lock (`_WriterLock`)."""
+    lock = _writer_lock(engine)
     if lock is not None:
-        lock.acquire()
+        lock.__enter__()
     try:
         with Session(engine.execution_options(write=True), expire_on_commit=False) as s:
             with s.begin():
                 yield s
     finally:
         if lock is not None:
-            lock.release()
+            lock.__exit__(None, None, None)
 
 
 def ping(engine: Engine) -> None:

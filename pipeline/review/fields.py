@@ -3,18 +3,23 @@
 Inputs: a proposal (the model's values, possibly incomplete for quarantined items), a
 reviewer's edits, or K reviewers' resolved values.
 Outputs: complete, validated values; or (agreed values, disputed field names).
-Invariants: a value that fails validation raises `FieldError` naming the field; the
-failure time and step always agree (`fail_step = round(fail_time_s * control_hz)`).
+Invariants: a value that fails validation raises `FieldError` naming the field; failure
+times live on the control grid (1/control_hz, 0.05 s at 20 Hz): a time between two steps is
+snapped to the nearest one (half-way goes to the later step), so the failure time and step
+always agree (`fail_time_s == fail_step / control_hz`).
 Agreement: level and category must be equal; failure times within ±tolerance of each
 other (max - min <= tolerance); actions when the texts are the same (ignoring case,
 surrounding spaces and a final full stop). A flag (values None) disputes every field.
+The agreed time is the median of the reviewers' control steps; with an even K whose middle
+two steps have no step half-way between them, the earlier of the two nearest steps is taken
+(deterministic, and on the grid: never a mean such as 3.075 s).
 """
 
 from __future__ import annotations
 
-import statistics
+import math
 
-from pipeline.records import Category, Level, step_at_time
+from pipeline.records import Category, Level
 
 FIELDS = ("fail_time_s", "recovery_level", "failure_category", "recovery_action")
 LEVELS = [lv.value for lv in Level]
@@ -29,8 +34,20 @@ class FieldError(ValueError):
         self.message = message
 
 
-def validate_field(field: str, value, duration_s: float | None) -> object:
-    """Check one field's value; return it normalized, or raise FieldError naming the field."""
+def snap_step(time_s: float, control_hz: int) -> int:
+    """The control step nearest to `time_s` (half-way rounds up, whatever the float noise)."""
+    return math.floor(time_s * control_hz + 0.5 + 1e-9)
+
+
+def grid_time(step: int, control_hz: int) -> float:
+    """The time of a control step, written as the grid shows it (59 -> 2.95 at 20 Hz)."""
+    return round(step / control_hz, 6)
+
+
+def validate_field(field: str, value, duration_s: float | None, control_hz: int = 20) -> object:
+    """Check one field's value; return it normalized, or raise FieldError naming the field.
+
+    A failure time is snapped to the control grid (see the module docstring)."""
     if field == "recovery_level":
         if value not in LEVELS:
             raise FieldError(field, f"must be one of {LEVELS}, got {value!r}")
@@ -52,7 +69,10 @@ def validate_field(field: str, value, duration_s: float | None) -> object:
         if value != value or value < 0 or (duration_s is not None and value > duration_s + 1e-6):
             limit = f"[0, {duration_s:.2f}]" if duration_s is not None else ">= 0"
             raise FieldError(field, f"must be within the episode, {limit} s, got {value}")
-        return round(float(value), 3)
+        step = snap_step(float(value), control_hz)
+        if duration_s is not None and step / control_hz > duration_s + 1e-6:
+            step = math.floor(duration_s * control_hz + 1e-9)  # the last step inside the episode
+        return grid_time(step, control_hz)
     raise FieldError(field, f"is not a reviewable field; choose from {list(FIELDS)}")
 
 
@@ -64,12 +84,35 @@ def resolve(proposal: dict, edits: dict, duration_s: float | None, control_hz: i
     out = {}
     for field in FIELDS:
         if field in edits:
-            out[field] = validate_field(field, edits[field], duration_s)
+            out[field] = validate_field(field, edits[field], duration_s, control_hz)
         elif proposal.get(field) is None:
             raise FieldError(field, "the model proposed no value; give one (revise)")
+        elif field == "fail_time_s":  # the model's time, on the same grid as the reviewers'
+            out[field] = grid_time(snap_step(float(proposal[field]), control_hz), control_hz)
         else:
             out[field] = proposal[field]
-    out["fail_step"] = step_at_time(out["fail_time_s"], control_hz)
+    out["fail_step"] = snap_step(out["fail_time_s"], control_hz)
+    return out
+
+
+def edited_fields(proposal: dict, values: dict, control_hz: int) -> list[str]:
+    """The fields whose resolved value differs from the model's (normalized) proposal.
+
+    Setting the model's own value (its time on the grid, its action up to case, spaces and
+    a final full stop) is not an edit."""
+    out = []
+    for field in FIELDS:
+        mine, model = values.get(field), proposal.get(field)
+        if model is None:
+            same = False
+        elif field == "fail_time_s":
+            same = snap_step(float(mine), control_hz) == snap_step(float(model), control_hz)
+        elif field == "recovery_action":
+            same = same_action(mine, model)
+        else:
+            same = mine == model
+        if not same:
+            out.append(field)
     return out
 
 
@@ -80,6 +123,15 @@ def same_action(a: str, b: str) -> bool:
     return norm(a) == norm(b)
 
 
+def agreed_step(steps: list[int]) -> int:
+    """The median control step; half-way between two steps (even K) goes to the earlier one."""
+    ordered = sorted(steps)
+    mid = len(ordered) // 2
+    if len(ordered) % 2:
+        return ordered[mid]
+    return (ordered[mid - 1] + ordered[mid]) // 2  # floor: the earlier step on a tie
+
+
 def agreement(values: list[dict | None], tolerance_s: float, control_hz: int) -> tuple[dict, list[str]]:
     """Per-field agreement of K reviewers' resolved values -> (agreed values, disputed fields)."""
     if not values or any(v is None for v in values):
@@ -88,9 +140,8 @@ def agreement(values: list[dict | None], tolerance_s: float, control_hz: int) ->
     disputed: list[str] = []
     times = [v["fail_time_s"] for v in values]
     if max(times) - min(times) <= tolerance_s + 1e-9:
-        # the reviewers' common time: their mean, reported on the control grid
-        t = round(statistics.fmean(times), 3)
-        agreed["fail_time_s"], agreed["fail_step"] = t, step_at_time(t, control_hz)
+        step = agreed_step([snap_step(t, control_hz) for t in times])
+        agreed["fail_time_s"], agreed["fail_step"] = grid_time(step, control_hz), step
     else:
         disputed.append("fail_time_s")
     for field in ("recovery_level", "failure_category"):

@@ -1,12 +1,14 @@
 """Building and running the review server from a run config.
 
 Inputs: the validated `Config` (run folder, `stage3` section).
-Outputs: the engine, the app; `serve` blocks running uvicorn; `ThreadedServer` runs it in
-a background thread on loopback (tests, the load benchmark) and stops it cleanly.
+Outputs: the engine, the app; `serve` blocks running uvicorn (one process, or N worker
+processes that each build the app from the config file: `app_from_env`); `ThreadedServer`
+runs it in a background thread on loopback (tests) and stops it cleanly.
 """
 
 from __future__ import annotations
 
+import os
 import socket
 import threading
 import time
@@ -37,6 +39,32 @@ def build_app(cfg: Config, engine: Engine | None = None, docs: bool = False):
     from pipeline.review.api import create_app
 
     return create_app(Path(cfg.out), engine or engine_for(cfg), settings(cfg), docs=docs)
+
+
+CONFIG_ENV = "RECOVER_REVIEW_CONFIG"  # the config file worker processes build their app from
+DOCS_ENV = "RECOVER_REVIEW_DOCS"
+
+
+def app_from_env():
+    """uvicorn's app factory in each worker process (`--workers N`)."""
+    from pipeline.config import load_config
+
+    return build_app(load_config(Path(os.environ[CONFIG_ENV])), docs=os.environ.get(DOCS_ENV) == "1")
+
+
+def serve(config_path: Path, cfg: Config, host: str, port: int, workers: int = 1, docs: bool = False) -> None:
+    """Serve until interrupted. Several processes share the port (uvicorn's supervisor) and
+    the SQLite file; their writes queue on the database's write lock file (db.write_session),
+    so decisions are neither lost nor double-counted whichever process takes them."""
+    import uvicorn
+
+    if workers <= 1:
+        uvicorn.run(build_app(cfg, docs=docs), host=host, port=port, log_level="info")
+        return
+    engine_for(cfg).dispose()  # create the tables once, before the workers race to
+    os.environ[CONFIG_ENV], os.environ[DOCS_ENV] = str(Path(config_path).resolve()), "1" if docs else "0"
+    uvicorn.run("pipeline.review.server:app_from_env", factory=True, host=host, port=port, workers=workers,
+                log_level="warning", access_log=False)
 
 
 def free_port() -> int:

@@ -14,15 +14,24 @@ from sqlalchemy.orm import Session
 
 from pipeline.review.audit import iso
 from pipeline.review.db import ADJUDICATING, COLLECTING, CONFLICT, Item, Lease, Review, User, now
-from pipeline.review.fields import CATEGORIES, FIELDS, LEVELS
+from pipeline.review.fields import CATEGORIES, FIELDS, LEVELS, agreement, grid_time, snap_step
+from pipeline.stage3.inputs import CAMERAS
 
 
 def _media(ctx: dict) -> dict:
     def url(rel: str | None) -> str | None:
         return f"/media/{rel}" if rel else None
 
+    hz = ctx.get("control_hz", 20)
+    duration = ctx.get("duration_s")
+    videos = ctx.get("videos") or {}
     return {
-        "videos": {cam: url(p) for cam, p in (ctx.get("videos") or {}).items()},
+        "videos": {cam: url(p) for cam, p in videos.items()},
+        # every review camera, in a fixed order, null where the episode has no such video
+        "cameras": [{"name": cam, "url": url(videos.get(cam))} for cam in CAMERAS],
+        # the failure time is set on the control grid: one step = 1/control_hz seconds
+        "control_step_s": round(1 / hz, 6),
+        "n_steps": None if duration is None else snap_step(duration, hz) + 1,
         "has_frames": bool(ctx.get("frames")),
         "has_evidence": bool(ctx.get("evidence")),
         "fps": ctx.get("fps"),
@@ -31,6 +40,16 @@ def _media(ctx: dict) -> dict:
         "phases": ctx.get("phases"),
         "events": ctx.get("events") or [],
     }
+
+
+def _proposal_step(item: Item) -> dict | None:
+    """The model's time on the control grid (what accepting it stores)."""
+    t = (item.proposal or {}).get("fail_time_s")
+    if t is None:
+        return None
+    hz = (item.context or {}).get("control_hz", 20)
+    step = snap_step(float(t), hz)
+    return {"fail_step": step, "fail_time_s": grid_time(step, hz)}
 
 
 def _base(item: Item) -> dict:
@@ -46,6 +65,7 @@ def _base(item: Item) -> dict:
         "quarantine_reason": item.quarantine_reason,
         "quarantine_detail": item.quarantine_detail,
         "proposal": item.proposal,  # a suggestion, shown with its model and prompt version
+        "proposal_step": _proposal_step(item),
         "media": _media(item.context or {}),
         "choices": {"recovery_level": LEVELS, "failure_category": CATEGORIES, "fields": list(FIELDS)},
     }
@@ -133,6 +153,61 @@ def queue(s: Session, user: User, can_adjudicate: bool, limit: int = 200) -> dic
             for i in conflicts
         ]
     return out
+
+
+def _open_to(user: User, t: float):
+    """Items `user` may still take: collecting, room for a reviewer, not reviewed by them."""
+    mine = select(Review.item_id).where(Review.reviewer_id == user.id)
+    leases = select(func.count(Lease.id)).where(Lease.item_id == Item.id, Lease.expires_at > t).scalar_subquery()
+    held = select(Lease.item_id).where(Lease.user_id == user.id, Lease.expires_at > t)
+    return Item.status.in_(COLLECTING) & Item.id.not_in(mine) & (
+        (Item.n_reviews + leases < Item.required_reviews) | Item.id.in_(held))
+
+
+def day_start(t: float) -> float:
+    """00:00 UTC of the day of `t` ("today" is the same day for every reviewer and server)."""
+    return t - t % 86400
+
+
+def progress(s: Session, user: User, tolerance_s: float, control_hz: int = 20) -> dict:
+    """One reviewer's own progress: decisions today, items left to them, and how often their
+    values agreed with each other reviewer's on items that have closed (all K reviews in).
+
+    Agreement is per pair (me, another reviewer) and per field, by the queue's own rule
+    (`fields.agreement`); open items are left out, so nothing about them is revealed."""
+    t = now()
+    today = day_start(t)
+    done_today = s.scalar(select(func.count(Review.id)).where(Review.reviewer_id == user.id,
+                                                              Review.created_at >= today)) or 0
+    left = s.scalar(select(func.count(Item.id)).where(_open_to(user, t))) or 0
+    closed = select(Review.item_id).join(Item, Item.id == Review.item_id).where(
+        Review.reviewer_id == user.id, Item.status.not_in(COLLECTING), Item.n_reviews >= Item.required_reviews)
+    rows = s.execute(select(Review.item_id, Review.reviewer_id, Review.values, Item.context)
+                     .join(Item, Item.id == Review.item_id).where(Review.item_id.in_(closed))
+                     .order_by(Review.item_id, Review.id)).all()
+    by_item: dict[int, list] = {}
+    for item_id, reviewer_id, values, ctx in rows:
+        by_item.setdefault(item_id, []).append((reviewer_id, values, (ctx or {}).get("control_hz", control_hz)))
+    pairs, whole = 0, 0
+    per_field = dict.fromkeys(FIELDS, 0)
+    for reviews in by_item.values():
+        mine = next(v for r, v, _ in reviews if r == user.id)
+        for r, other, hz in reviews:
+            if r == user.id:
+                continue
+            _, disputed = agreement([mine, other], tolerance_s, hz)
+            pairs += 1
+            whole += not disputed
+            for f in FIELDS:
+                per_field[f] += f not in disputed
+    share = (lambda n: round(n / pairs, 4) if pairs else None)
+    return {
+        "done_today": done_today,
+        "day_start": iso(today),
+        "left": left,
+        "agreement": {"closed_items": len(by_item), "pairs": pairs, "all_fields": share(whole),
+                      "by_field": {f: share(n) for f, n in per_field.items()}},
+    }
 
 
 def counts(s: Session) -> dict:

@@ -8,7 +8,10 @@ Invariants:
 - leases are advisory and expire; an expired lease holds nothing;
 - a decision carries the version of the reviewer's own review it replaces (0 = none):
   anything else is stale (409); the same decision again (same idempotency key, or the
-  same content) is answered with the stored review and changes nothing;
+  same content after normalization, e.g. `fail_time_s: "5"` when it is 5) is answered
+  with the stored review and changes nothing (no new version, no audit event);
+- an edit is a field whose value differs from the model's proposal: a revision that ends
+  up with the model's own values (its time on the control grid) is stored as an accept;
 - once K reviews exist the item leaves the queue: final when every field agrees,
   otherwise conflict with the disputed fields named (see `fields.agreement`).
 """
@@ -36,7 +39,7 @@ from pipeline.review.db import (
     now,
 )
 from pipeline.review.errors import Invalid, NotFound, Stale
-from pipeline.review.fields import FieldError, agreement, resolve
+from pipeline.review.fields import FieldError, agreement, edited_fields, resolve
 
 DECISIONS = ("accept", "revise", "flag")
 
@@ -136,15 +139,18 @@ _last_sweep: dict[str, float] = {}  # database URL -> time of the last sweep
 SWEEP_EVERY_S = 5.0
 
 
+def sweep_due(s: Session, t: float) -> bool:
+    return t - _last_sweep.get(s.get_bind().url.render_as_string(hide_password=True), 0.0) >= SWEEP_EVERY_S
+
+
 def lease_next(s: Session, user: User, cfg: QueueSettings) -> Item | None:
     """The user's next item: one they already hold, else the fullest open item with room."""
     t = now()
     # every query below already ignores expired leases; the sweep only tidies rows and
     # statuses, so it need not run on every request
-    bind = s.get_bind().url.render_as_string(hide_password=True)
-    if t - _last_sweep.get(bind, 0.0) >= SWEEP_EVERY_S:
+    if sweep_due(s, t):
         expire(s, t)
-        _last_sweep[bind] = t
+        _last_sweep[s.get_bind().url.render_as_string(hide_password=True)] = t
     held = s.scalar(
         select(Item).join(Lease, Lease.item_id == Item.id)
         .where(Lease.user_id == user.id, Lease.expires_at > t, Item.status.in_(COLLECTING), ~_reviewed_by(user.id),
@@ -166,21 +172,27 @@ def lease_next(s: Session, user: User, cfg: QueueSettings) -> Item | None:
     return item
 
 
-def _values_for(item: Item, decision: str, fields: dict | None, reason: str | None, cfg: QueueSettings) -> dict | None:
+def _values_for(item: Item, decision: str, fields: dict | None, reason: str | None,
+                cfg: QueueSettings) -> tuple[str, dict | None, list[str]]:
+    """(the decision as stored, its resolved values, the fields edited against the proposal)."""
     if decision not in DECISIONS:
         raise Invalid(f"decision: must be one of {list(DECISIONS)}, got {decision!r}", field="decision")
     if decision == "flag":
         if not (reason or "").strip():
             raise Invalid("reason: a flag needs a reason", field="reason")
-        return None
+        return decision, None, []
     if decision == "revise" and not fields:
         raise Invalid("fields: a revision must change at least one field", field="fields")
     edits = fields if decision == "revise" else {}
     ctx = item.context or {}
+    hz = ctx.get("control_hz", cfg.control_hz)
     try:
-        return resolve(item.proposal, edits, ctx.get("duration_s"), ctx.get("control_hz", cfg.control_hz))
+        values = resolve(item.proposal, edits, ctx.get("duration_s"), hz)
     except FieldError as e:
         raise Invalid(str(e), field=e.field) from None
+    edited = edited_fields(item.proposal, values, hz) if decision == "revise" else []
+    # confirming the model's values (e.g. its time set at the playhead) is an accept, not an edit
+    return ("revise" if edited else "accept"), values, edited
 
 
 def _same(r: Review, decision: str, values: dict | None, reason: str | None) -> bool:
@@ -196,7 +208,7 @@ def submit_review(s: Session, user: User, item_id: int, body: dict, cfg: QueueSe
     mine = s.scalar(select(Review).where(Review.item_id == item.id, Review.reviewer_id == user.id))
     if mine is not None and mine.idempotency_key == key:
         return mine, True
-    values = _values_for(item, decision, body.get("fields"), body.get("reason"), cfg)
+    decision, values, edited = _values_for(item, decision, body.get("fields"), body.get("reason"), cfg)
     reason = ((body.get("reason") or "").strip() or None) if decision == "flag" else None
     if mine is not None and _same(mine, decision, values, reason):
         return mine, True
@@ -207,7 +219,6 @@ def submit_review(s: Session, user: User, item_id: int, body: dict, cfg: QueueSe
                     current={"version": current})
     if item.status not in COLLECTING:
         raise Stale(f"item {item.id} is {item.status}; it no longer takes reviews", current={"status": item.status})
-    edited = sorted((body.get("fields") or {}).keys()) if decision == "revise" else []
     before = _review_dict(mine) if mine is not None else None
     if mine is None:
         _refuse_if_read(s, user, item)

@@ -4,7 +4,8 @@ selected (task, init state) and records the episodes (`recover stage1`, `make st
 Inputs: a validated `Config` (tasks, stage1 policy/rollout/video, executor).
 Outputs under `run.output_dir`: `config.resolved.yaml` (also `stage1/config.resolved.yaml`),
 the episode folders and done markers (see `pipeline.records`), `stage1/episodes.parquet`
-(the manifest, rebuilt from the markers at the end of every run), `stage1/summary.json`.
+(the manifest, rebuilt from the markers at the end of every run), `stage1/summary.json`
+(with `executor`: the attempts lost to dead workers, also logged by the executor).
 
 Invariants: rerunning the same command skips done episodes and finishes the others, so
 a crash or kill followed by a rerun leaves every planned episode exactly once; resuming
@@ -22,12 +23,12 @@ import yaml
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-from pipeline.atomic import Completions
+from pipeline.atomic import Completions, write_text
 from pipeline.config import Config, save_resolved
 from pipeline.errors import ConfigError
-from pipeline.executors import Executor, make_executor
+from pipeline.executors import Executor, SetAside, make_executor
 from pipeline.stage1.summary import collect_records, summarize, summary_table, write_manifest, write_summary
-from pipeline.stage1.units import make_shards, plan_units
+from pipeline.stage1.units import Shard, make_shards, plan_units
 from pipeline.stage1.worker import run_shard
 
 # Extra environment of each worker process. Mesa's llvmpipe starts one render thread per
@@ -53,6 +54,11 @@ def _check_resumable(cfg: Config, stage1: Path) -> None:
             f"{saved}: {stage1} holds episodes of a different run seed/policy/rollout config; "
             "use a new run.output_dir (or delete the old one) instead of mixing experiments"
         )
+
+
+def _shard_label(shard: Shard) -> str:
+    suite, task = shard.task
+    return f"shard {suite}/{task} init states {','.join(str(u.init_state) for u in shard.units)}"
 
 
 def run(
@@ -102,15 +108,24 @@ def run(
                 progress.console.print(f"[red]episode error[/red] {ev['unit']}: {ev['reason']}: {ev['detail']}")
 
         jobs = [(s, cfg.model_dump(mode="json"), str(stage1), policy_factory) for s in shards]
-        executor.run(run_shard, jobs, on_event)
+        results = executor.run(run_shard, jobs, on_event, label=lambda i, job: _shard_label(job[0]))
         progress.update(bar, **fields())
+    # a shard whose worker kept dying: its unfinished episodes are errors, counted and retried on rerun
+    for shard, res in zip(shards, results):
+        if isinstance(res, SetAside):
+            for u in shard.units:
+                if not done.is_done(u.unit_id):
+                    write_text(stage1 / "errors" / f"{u.unit_id}.txt", f"worker died: {res.reason}\n")
+                    stats["errors"].append({"kind": "error", "unit": u.unit_id, "reason": "WorkerDied",
+                                            "detail": res.reason})
 
     records = collect_records(stage1, [u.unit_id for u in units])
     manifest = write_manifest(stage1, records)
     rows = summarize(records)
     elapsed = time.perf_counter() - t0
     write_summary(stage1, rows, {"planned": len(units), "done": len(records), "errors": stats["errors"],
-                                 "ran_this_time": stats["ran"], "wall_s": round(elapsed, 2)})
+                                 "ran_this_time": stats["ran"], "wall_s": round(elapsed, 2),
+                                 "executor": executor.report.model_dump(mode="json")})
     console.print(summary_table(rows))
     missing = len(units) - len(records)
     msg = f"manifest {manifest} ({len(records)}/{len(units)} episodes)"

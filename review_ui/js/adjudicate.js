@@ -2,10 +2,9 @@
 // only the disputed fields are decided here, with a required rationale.
 import { api, ApiError, newKey } from "./api.js";
 import { h } from "./dom.js";
-import { FieldControls, FIELD_LABELS, FIELDS, showValue } from "./fields.js";
-import { episodeHeader, itemKeys, playerAndTracks, versionLine } from "./item_common.js";
-
-const REVIEWER_COLORS = ["#7c3aed", "#0891b2", "#db2777", "#65a30d"];
+import { FieldControls, FIELD_LABELS, FIELDS, same, showValue } from "./fields.js";
+import { dashCss, reviewerMarker } from "./colors.js";
+import { episodeHeader, itemKeys, playerAndTracks, playheadTime, versionLine } from "./item_common.js";
 
 export async function adjudicatePage(root, id, app) {
   let item = await api(`/api/items/${id}/adjudication`);
@@ -18,16 +17,18 @@ export async function adjudicatePage(root, id, app) {
   const disputed = item.disputed;
   const decidable = !claimError && (item.status === "conflict" || item.status === "adjudicating");
   const media = await playerAndTracks(item, {
+    initial: {},  // nothing decided yet
     markers: (values) => [
-      { t: p.fail_time_s, label: "model", short: "model", color: "#ea580c", dash: true },
+      { t: p.fail_time_s, label: "model", short: "model", kind: "model" },
       ...item.reviews.map((r, i) => ({ t: r.values ? r.values.fail_time_s : null, label: r.reviewer, short: r.reviewer,
-        color: REVIEWER_COLORS[i % REVIEWER_COLORS.length] })),
-      { t: values.fail_time_s ?? item.agreed.fail_time_s, label: "your decision", short: "final", color: "#2563eb" },
+        kind: "reviewer", style: reviewerMarker(i) })),
+      { t: disputed.includes("fail_time_s") ? values.fail_time_s : item.agreed.fail_time_s,
+        label: "your decision", short: "final", kind: "final" },
     ],
   });
   const controls = new FieldControls({
     fields: disputed, values: {}, suggested: p, choices: item.choices, duration: item.media.duration_s,
-    getPlayhead: () => media.player.simTimeOfFrame(media.player.frame()),
+    controlHz: item.media.control_hz || 20, getPlayhead: () => playheadTime(media.player),
     onChange: (values) => media.tracks.setMarkers(media.markers(values)),
   });
 
@@ -36,19 +37,25 @@ export async function adjudicatePage(root, id, app) {
     ? h("button", { type: "button", className: "use", title: "use this value", onclick: () => controls.set(f, v) }, "use") : null;
   const table = h("table", { className: "compare", id: "compare" },
     h("thead", {}, h("tr", {}, h("th", {}, "field"), h("th", {}, "model ", h("span", { className: "pill" }, "suggestion")),
-      ...item.reviews.map((r, i) => h("th", {}, h("i", { className: "dot", style: `background:${REVIEWER_COLORS[i % 4]}` }), r.reviewer,
+      ...item.reviews.map((r, i) => h("th", {}, h("i", { className: "line", style: `background:${dashCss(reviewerMarker(i))}` }), r.reviewer,
         h("span", { className: "muted" }, ` · ${r.decision}`))),
       h("th", {}, "outcome"))),
-    h("tbody", {}, ...FIELDS.map((f) => h("tr", { className: disputed.includes(f) ? "disputed" : "agreed", dataset: { field: f } },
-      h("th", {}, FIELD_LABELS[f], disputed.includes(f) ? h("span", { className: "pill warn" }, "disputed") : null),
-      cell(f, p[f], useBtn(f, p[f])),
-      ...item.reviews.map((r) => r.values ? cell(f, r.values[f], useBtn(f, r.values[f]))
-        : h("td", { className: "flagged" }, "flagged: ", h("q", {}, r.reason))),
-      h("td", {}, disputed.includes(f) ? h("span", { className: "muted" }, "decide below")
-        : h("span", {}, showValue(f, item.agreed[f]), " ", h("span", { className: "pill ok" }, "agreed")))))));
+    h("tbody", {}, ...FIELDS.map((f) => disputed.includes(f)
+      ? h("tr", { className: "disputed", dataset: { field: f } },
+        h("th", {}, FIELD_LABELS[f], h("span", { className: "pill warn" }, "disputed")),
+        cell(f, p[f], useBtn(f, p[f])),
+        ...item.reviews.map((r) => r.values ? cell(f, r.values[f], useBtn(f, r.values[f]))
+          : h("td", { className: "flagged" }, "flagged: ", h("q", {}, r.reason))),
+        h("td", {}, h("span", { className: "muted" }, "decide below")))
+      // an agreed field: the model's and the common value on one line (the reviewers agree)
+      : h("tr", { className: "agreed", dataset: { field: f } }, h("th", {}, FIELD_LABELS[f]),
+        h("td", { colSpan: item.reviews.length + 2 }, h("span", { className: "muted" }, "model "), showValue(f, p[f]),
+          same(f, p[f], item.agreed[f], item.media.control_hz || 20) ? null
+            : h("span", {}, h("span", { className: "muted" }, " · reviewers "), showValue(f, item.agreed[f])),
+          " ", h("span", { className: "pill ok" }, "agreed"))))));
 
   const rationale = h("textarea", { id: "rationale", rows: 3, placeholder: "why this outcome (required; kept in the audit log)",
-    oninput: () => rationale.classList.remove("invalid") });
+    oninput: () => { rationale.classList.remove("invalid"); if (status.classList.contains("error")) setStatus("", ""); } });
   const exclude = h("input", { type: "checkbox", id: "exclude" });
   const status = h("div", { className: "decision-status", id: "adjudication-status" });
   const setStatus = (kind, text, extra) => { status.className = `decision-status ${kind}`; status.replaceChildren(h("span", {}, text), extra || ""); };

@@ -8,9 +8,14 @@ export const FIELD_LABELS = {
   failure_category: "Failure category", recovery_action: "Recovery action",
 };
 
-export function same(field, a, b) {
+// the control step of a time, as the server snaps it (half-way goes to the later step)
+export const snapStep = (t, hz) => Math.floor(t * hz + 0.5 + 1e-9);
+export const gridTime = (t, hz) => Math.round(snapStep(t, hz) / hz * 1e6) / 1e6;
+
+// equal as the server compares them: times on the same control step, actions up to spaces
+export function same(field, a, b, hz = 20) {
   if (a == null || b == null) return a == b;
-  if (field === "fail_time_s") return Math.abs(a - b) < 1e-3;
+  if (field === "fail_time_s") return snapStep(Number(a), hz) === snapStep(Number(b), hz);
   if (field === "recovery_action") return a.trim().replace(/\s+/g, " ") === b.trim().replace(/\s+/g, " ");
   return a === b;
 }
@@ -25,8 +30,9 @@ export function showValue(field, v) {
 
 // Controls for a set of fields. `suggested` marks the model's value on each control.
 export class FieldControls {
-  constructor({ fields = FIELDS, values, suggested = {}, choices, onChange, getPlayhead, duration }) {
+  constructor({ fields = FIELDS, values, suggested = {}, choices, onChange, getPlayhead, duration, controlHz = 20 }) {
     this.fields = fields;
+    this.hz = controlHz;
     this.values = { ...values };
     this.suggested = suggested;
     this.onChange = onChange || (() => {});
@@ -49,16 +55,25 @@ export class FieldControls {
     if (f === "recovery_level") {
       return h("div", { className: "choice-grid levels" }, ...choices.recovery_level.map((lv, i) =>
         h("button", { type: "button", className: "choice", dataset: { value: lv }, id: `level-${lv}`,
-          onclick: () => this.set(f, lv) }, h("b", {}, lv), " ", LEVEL_NAMES[lv] || "", " ", h("kbd", {}, String(i + 1)))));
+          title: `${lv} · ${LEVEL_NAMES[lv] || ""}`, onclick: () => this.set(f, lv) },
+        h("span", { className: "choice-text" }, h("b", {}, lv), " ", LEVEL_NAMES[lv] || ""), h("kbd", {}, String(i + 1)))));
     }
     if (f === "failure_category") {
       return h("div", { className: "choice-grid categories" }, ...choices.failure_category.map((c) =>
         h("button", { type: "button", className: "choice", dataset: { value: c }, id: `cat-${c}`,
-          onclick: () => this.set(f, c) }, categoryLabel(c), " ", h("kbd", {}, CATEGORY_KEYS[c] || ""))));
+          title: categoryLabel(c), onclick: () => this.set(f, c) },
+        h("span", { className: "choice-text" }, categoryLabel(c)), h("kbd", {}, CATEGORY_KEYS[c] || ""))));
     }
     if (f === "fail_time_s") {
       this.timeInput = h("input", { type: "number", step: "0.05", min: "0", max: duration != null ? String(duration) : undefined,
-        id: "input-fail-time", inputMode: "decimal", oninput: () => this.set(f, this.timeInput.value === "" ? null : Number(this.timeInput.value), false) });
+        id: "input-fail-time", inputMode: "decimal", oninput: () => this.set(f, this.timeInput.value === "" ? null : Number(this.timeInput.value), false),
+        // a typed time shows, once left, the control step it will be stored as
+        onchange: () => {
+          if (this.timeInput.value === "") return;
+          const v = gridTime(Number(this.timeInput.value), this.hz);
+          this.timeInput.value = String(v);
+          this.set(f, v, false);
+        } });
       return h("div", { className: "time-row" }, this.timeInput, h("span", { className: "unit" }, "s"),
         h("button", { type: "button", id: "btn-set-time", onclick: () => this.setTimeAtPlayhead() },
           "Set at playhead ", h("kbd", {}, "T")));
@@ -69,7 +84,7 @@ export class FieldControls {
   }
 
   setTimeAtPlayhead() {
-    if (this.fields.includes("fail_time_s")) this.set("fail_time_s", Math.round(this.getPlayhead() * 1000) / 1000);
+    if (this.fields.includes("fail_time_s")) this.set("fail_time_s", this.getPlayhead());
   }
 
   set(f, v, sync = true) {
@@ -94,14 +109,18 @@ export class FieldControls {
     this.refreshBadges();
   }
 
+  // "edited" once a value is chosen and differs from the model's: an empty field (nothing
+  // chosen yet, e.g. on the adjudication page) is not an edit
   refreshBadges() {
-    for (const f of this.fields)
-      this.rows[f].row.classList.toggle("edited", !same(f, this.values[f], this.suggested[f]));
+    for (const f of this.fields) {
+      const v = this.values[f];
+      this.rows[f].row.classList.toggle("edited", v != null && v !== "" && !same(f, v, this.suggested[f], this.hz));
+    }
   }
 
   edits() {
     const out = {};
-    for (const f of this.fields) if (!same(f, this.values[f], this.suggested[f]) && this.values[f] != null && this.values[f] !== "") out[f] = this.values[f];
+    for (const f of this.fields) if (!same(f, this.values[f], this.suggested[f], this.hz) && this.values[f] != null && this.values[f] !== "") out[f] = this.values[f];
     return out;
   }
 

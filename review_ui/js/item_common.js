@@ -17,11 +17,12 @@ export function versionLine(p) {
   const v = (x) => [x.model || x.source, x.prompt_name ? `${x.prompt_name}${x.prompt_hash ? `@${x.prompt_hash.slice(0, 8)}` : ""}` : null]
     .filter(Boolean).join(" · ") || "—";
   return h("div", { className: "version", id: "model-version" },
-    h("div", {}, h("b", {}, "time by "), v(loc)), h("div", {}, h("b", {}, "labels by "), v(ch)));
+    h("span", {}, h("b", {}, "time by "), v(loc)), " · ", h("span", {}, h("b", {}, "labels by "), v(ch)));
 }
 
-// video + evidence tracks kept on one playhead; `markers(values)` gives the time markers
-export async function playerAndTracks(item, { markers }) {
+// video + evidence tracks kept on one playhead; `markers(values)` gives the time markers,
+// first for the `initial` values of the fields
+export async function playerAndTracks(item, { markers, initial }) {
   const [frames, evidence] = await Promise.all([
     item.media.has_frames ? api(`/api/items/${item.id}/frames`) : null,
     item.media.has_evidence ? api(`/api/items/${item.id}/evidence`) : null,
@@ -29,11 +30,11 @@ export async function playerAndTracks(item, { markers }) {
   let tracks = null;
   const player = new Player(item.media, frames, {
     modelTime: item.proposal.fail_time_s,
-    onTick: (pl) => { if (tracks) tracks.setPlayhead(pl.main.paused ? pl.simTimeOfFrame(pl.frame()) : pl.simTime()); },
+    onTick: (pl) => { if (tracks) tracks.setPlayhead(pl.time()); },
   });
   tracks = new Tracks({
-    evidence, media: item.media, markers: markers({ ...item.proposal, ...(item.my_review?.values || {}) }),
-    onSeek: (t) => player.seekSim(t),
+    evidence, media: item.media, markers: markers(initial),
+    onSeek: (t) => player.seekGrid(t),
   });
   const el = h("div", { className: "media" }, player.el, tracks.el);
   return {
@@ -41,6 +42,12 @@ export async function playerAndTracks(item, { markers }) {
     start: () => { tracks.draw(); tracks.updateReadout(); },
     destroy: () => player.destroy(),
   };
+}
+
+// the playhead for T: paused, it is on the control grid (or exactly at the model's time)
+export function playheadTime(player) {
+  if (player.playing()) player.pause();
+  return Math.round(player.time() * 1e6) / 1e6;
 }
 
 // returns true when the key was a video key
@@ -52,8 +59,9 @@ export function mediaKeys(e, player) {
     case "ArrowRight": case ".": player.step(big); return true;
     case "[": player.faster(-1); return true;
     case "]": player.faster(1); return true;
-    case "Home": player.seekFrame(0); return true;
-    case "End": player.seekFrame(player.nFrames - 1); return true;
+    case "Home": player.seekTime(0); return true;
+    case "End": player.seekTime(player.end); return true;
+    case "v": case "V": player.cycleView(); return true;
     default: return false;
   }
 }
@@ -65,7 +73,8 @@ const CATEGORY_BY_KEY = Object.fromEntries(Object.entries(CATEGORY_KEYS).map(([c
 export function itemKeys(e, media, controls, proposal) {
   if (mediaKeys(e, media.player)) return true;
   const k = e.key.toLowerCase();
-  if (k === "m" && proposal.fail_time_s != null) { media.player.seekSim(proposal.fail_time_s); return true; }
+  // exactly the model's time (not the nearest frame), so T then sets exactly that time
+  if (k === "m" && proposal.fail_time_s != null) { media.player.seekTime(proposal.fail_time_s); return true; }
   if (k === "t") { controls.setTimeAtPlayhead(); return true; }
   if (["1", "2", "3", "4"].includes(k)) { controls.set("recovery_level", `L${k}`); return true; }
   if (CATEGORY_BY_KEY[k]) { controls.set("failure_category", CATEGORY_BY_KEY[k]); return true; }

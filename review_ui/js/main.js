@@ -3,6 +3,7 @@
 import { adjudicatePage } from "./adjudicate.js";
 import { api, ApiError, setCsrf } from "./api.js";
 import { h } from "./dom.js";
+import { progressLine } from "./progress.js";
 import { queuePage, statusPage } from "./queue.js";
 import { reviewPage } from "./review.js";
 
@@ -32,6 +33,8 @@ const app = {
     const [, page, id] = (location.hash || "#/queue").split("/");
     if (!me && page !== "login") { if (!(await whoami())) return app.go("#/login"); }
     view.dataset.page = page;
+    document.body.dataset.page = page;
+    if (me && page !== "login") refreshProgress();
     view.replaceChildren(h("p", { className: "muted loading" }, "Loading…"));
     try {
       if (page === "login") current = loginPage();
@@ -48,6 +51,13 @@ function failure(e) {
   view.replaceChildren(h("div", { className: "banner error" }, e instanceof ApiError ? `${e.status}: ${e.message}` : String(e),
     " ", h("a", { href: "#/queue" }, "back to the queue")));
   if (!(e instanceof ApiError)) console.error(e);
+}
+
+// the reviewer's own progress in the top bar, fetched on every page change (after decisions)
+async function refreshProgress() {
+  const el = document.getElementById("progress");
+  try { progressLine(el, await api("/api/progress")); el.hidden = false; }
+  catch (e) { el.hidden = true; if (!(e instanceof ApiError)) console.error(e); }
 }
 
 async function whoami() {

@@ -1,6 +1,7 @@
 // The queue page: what I hold, what is open to me, what I decided; conflicts for adjudicators.
 import { api } from "./api.js";
 import { h } from "./dom.js";
+import { progressCounts } from "./progress.js";
 
 function table(rows, cols, empty) {
   if (!rows.length) return h("p", { className: "muted empty" }, empty);
@@ -22,7 +23,8 @@ export async function queuePage(root, app) {
     h("section", { className: "card hero" },
       h("div", {}, h("h1", {}, `Hello ${q.user}`),
         h("p", { className: "muted" }, `${q.held.length} held by you · ${q.available_total} open to you · ${q.reviewed.length} decided by you`,
-          q.conflicts.length ? ` · ${q.conflicts.length} conflicts to adjudicate` : "")),
+          q.conflicts.length ? ` · ${q.conflicts.length} conflicts to adjudicate` : ""),
+        q.progress ? progressCounts(q.progress) : null),
       start),
   ];
   if (q.role !== "reviewer") {

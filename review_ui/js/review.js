@@ -2,9 +2,9 @@
 // A reviewer sees the model's proposal (as a suggestion, with model and prompt version) and
 // never another reviewer's decision (the API does not send them).
 import { api, ApiError, newKey } from "./api.js";
-import { fmtTime, h } from "./dom.js";
-import { FieldControls, FIELDS, showValue } from "./fields.js";
-import { episodeHeader, itemKeys, playerAndTracks, versionLine } from "./item_common.js";
+import { h } from "./dom.js";
+import { FIELD_LABELS, FieldControls, FIELDS, showValue } from "./fields.js";
+import { episodeHeader, itemKeys, playerAndTracks, playheadTime, versionLine } from "./item_common.js";
 
 
 export async function reviewPage(root, id, app) {
@@ -18,17 +18,19 @@ export async function reviewPage(root, id, app) {
   const open = item.state === "open" && !taken;
   const start = item.my_review && item.my_review.values ? item.my_review.values : p;
   const view = { version: item.version, busy: false, pendingAccept: false };
+  const incomplete = FIELDS.some((f) => p[f] == null);  // nothing complete to accept: revise instead
 
   const media = await playerAndTracks(item, {
+    initial: start,
     markers: (values) => [
-      { t: p.fail_time_s, label: "model's failure time", short: "model", color: "#ea580c", dash: true },
-      { t: values.fail_time_s, label: "your failure time", short: "you", color: "#2563eb" },
+      { t: p.fail_time_s, label: "model's failure time", short: "model", kind: "model" },
+      { t: values.fail_time_s, label: "your failure time", short: "you", kind: "you" },
     ],
   });
   const controls = new FieldControls({
     values: Object.fromEntries(FIELDS.map((f) => [f, start[f] ?? null])),
-    suggested: p, choices: item.choices, duration: item.media.duration_s,
-    getPlayhead: () => media.player.simTimeOfFrame(media.player.frame()),
+    suggested: p, choices: item.choices, duration: item.media.duration_s, controlHz: item.media.control_hz || 20,
+    getPlayhead: () => playheadTime(media.player),
     onChange: (values) => { media.tracks.setMarkers(media.markers(values)); view.pendingAccept = false; },
   });
 
@@ -40,10 +42,20 @@ export async function reviewPage(root, id, app) {
   reason.addEventListener("keydown", (e) => { if (e.key === "Enter" && !e.shiftKey) { e.preventDefault(); submit("flag"); } });
   const btn = (id, cls, label, key, fn) => h("button", { type: "button", id, className: cls, onclick: fn }, label, " ", h("kbd", {}, key));
   const buttons = h("div", { className: "decision-buttons" },
-    btn("btn-accept", "primary", "Accept suggestion", "A", () => submit("accept")),
-    btn("btn-revise", "secondary", "Submit revision", "S", () => submit("revise")),
-    btn("btn-flag", "warn-outline", "Flag ambiguous", "F", () => openFlag()),
-    btn("btn-next", "ghost", "Next item", "N", () => app.next()));
+    btn("btn-accept", "primary", "Accept", "A", () => submit("accept")),
+    btn("btn-revise", "secondary", "Revise", "S", () => submit("revise")),
+    btn("btn-flag", "warn-outline", "Flag", "F", () => openFlag()),
+    btn("btn-next", "ghost", "Next", "N", () => app.next()));
+  buttons.querySelector("#btn-accept").title = "accept the model's suggestion";
+  buttons.querySelector("#btn-revise").title = "submit your revision (the fields marked edited)";
+  buttons.querySelector("#btn-flag").title = "flag as ambiguous (a reason is required)";
+  // which buttons work: none while saving; only Next on a closed item; no Accept without a
+  // complete suggestion (a quarantined item: the reviewer sets every field and submits)
+  function setButtons(busy) {
+    buttons.querySelectorAll("button").forEach((b) => {
+      b.disabled = busy || (!open && b.id !== "btn-next") || (b.id === "btn-accept" && incomplete);
+    });
+  }
 
   function setStatus(kind, text, extra) {
     status.className = `decision-status ${kind}`;
@@ -61,7 +73,11 @@ export async function reviewPage(root, id, app) {
     const body = { decision, version: view.version, idempotency_key: newKey() };
     if (decision === "revise") {
       body.fields = controls.edits();
-      if (!Object.keys(body.fields).length) return setStatus("error", "Nothing is edited: change a field, or press A to accept the suggestion.");
+      if (!Object.keys(body.fields).length) {
+        return setStatus("error", incomplete
+          ? "Nothing is set: the model gave no usable values, so set every field, then press S."
+          : "Nothing is edited: change a field, or press A to accept the suggestion.");
+      }
     }
     if (decision === "accept" && incomplete) return setStatus("error", "The model proposed no complete values: set every field and press S.");
     if (decision === "accept" && Object.keys(controls.edits()).length && !view.pendingAccept) {
@@ -73,7 +89,7 @@ export async function reviewPage(root, id, app) {
       body.reason = reason.value.trim();
     }
     view.busy = true;
-    buttons.querySelectorAll("button").forEach((b) => { b.disabled = true; });
+    setButtons(true);
     setStatus("busy", "Saving…");
     try {
       const r = await api(`/api/items/${id}/review`, { method: "POST", body });
@@ -96,16 +112,17 @@ export async function reviewPage(root, id, app) {
       } else setStatus("error", `Not saved (${e.status}): ${e.message}`);
     } finally {
       view.busy = false;
-      buttons.querySelectorAll("button").forEach((b) => { b.disabled = false; });
+      setButtons(false);
     }
   }
 
   const suggestion = h("section", { className: "card suggestion", id: "suggestion" },
     h("h3", {}, "Model suggestion ", h("span", { className: "pill" }, "suggestion")),
     versionLine(p),
-    h("dl", {}, ...FIELDS.flatMap((f) => [h("dt", {}, f.replaceAll("_", " ")), h("dd", { dataset: { field: f } }, showValue(f, p[f]))])),
-    h("div", { className: "suggestion-actions" },
-      p.fail_time_s != null ? h("button", { type: "button", className: "ghost", onclick: () => media.player.seekSim(p.fail_time_s) }, "Jump to ", fmtTime(p.fail_time_s), " ", h("kbd", {}, "M")) : null));
+    FIELDS.every((f) => p[f] == null) ? h("p", { className: "muted small" }, "No values proposed.") :
+    h("dl", {}, ...FIELDS.flatMap((f) => [h("dt", {}, FIELD_LABELS[f]), h("dd", { dataset: { field: f }, title: f === "recovery_action" ? p[f] || "" : undefined }, showValue(f, p[f]),
+      f === "fail_time_s" && p.fail_time_s != null ? h("button", { type: "button", className: "ghost jump", id: "btn-jump-suggested",
+        onclick: () => media.player.seekTime(p.fail_time_s) }, "jump ", h("kbd", {}, "M")) : null)])));
 
   const side = h("aside", { className: "side" },
     taken ? h("div", { className: "banner error", id: "taken-banner" }, taken, " · press ", h("kbd", {}, "N"), " for the next item") : null,
@@ -116,9 +133,9 @@ export async function reviewPage(root, id, app) {
     suggestion,
     h("section", { className: "card decision" }, h("h3", {}, "Your decision"), controls.el, flagBox, buttons, status));
   root.replaceChildren(episodeHeader(item), h("div", { className: "item-layout" }, h("div", { className: "stage" }, media.el), side));
-  if (!open) { controls.disable(true); buttons.querySelectorAll("button:not(#btn-next)").forEach((b) => { b.disabled = true; }); }
-  const incomplete = FIELDS.some((f) => p[f] == null);  // nothing complete to accept: revise instead
-  if (incomplete) { const a = buttons.querySelector("#btn-accept"); a.disabled = true; a.title = "the model proposed no complete values"; }
+  if (!open) controls.disable(true);
+  if (incomplete) buttons.querySelector("#btn-accept").title = "the model proposed no complete values";
+  setButtons(false);
   showMine(item.my_review);
   media.start();
 

@@ -79,3 +79,35 @@ def test_two_reviewers_pulling_from_the_queue_at_once_share_items_up_to_k(server
     # with K = 2 and two reviewers, each of them reviews every item exactly once
     assert sorted(decided["ann"]) == sorted(items) == sorted(decided["bob"])
     assert len(_stored(engine)) == 2 * len(items)
+
+
+def test_one_reviewer_sending_two_different_first_decisions_at_once_stores_one(engine, settings, people, items):
+    # both pass the checks made before the writer lock (no review of theirs yet); under the
+    # lock the second finds the first and is answered as a stale edit, never a second review
+    from pipeline.review import fastwrite
+    from pipeline.review.errors import Stale
+
+    with read_session(engine) as s:
+        ann = s.scalar(select(User).where(User.name == "ann"))
+    barrier = threading.Barrier(8)
+    outcomes: list[str] = []
+
+    def send(i: int) -> None:
+        body = {"decision": "revise", "version": 0, "idempotency_key": f"k{i}",
+                "fields": {"recovery_level": f"L{1 + i % 2}"}}
+        barrier.wait()
+        try:
+            outcomes.append("replayed" if fastwrite.decide(engine, ann, items[0], body, settings)["replayed"]
+                            else "stored")
+        except Stale:
+            outcomes.append("stale")
+
+    threads = [threading.Thread(target=send, args=(i,)) for i in range(8)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(timeout=60)
+    with read_session(engine) as s:
+        assert s.scalar(select(func.count(Review.id)).where(Review.item_id == items[0])) == 1
+        assert s.scalar(select(Item.n_reviews).where(Item.id == items[0])) == 1
+    assert outcomes.count("stored") == 1 and len(outcomes) == 8

@@ -91,3 +91,20 @@ def test_resuming_into_a_folder_of_another_experiment_is_refused(tmp_path):
         _check_resumable(changed, stage1)
     # video settings may change between resumptions (e.g. render successes later)
     _check_resumable(_cfg(tmp_path, video={"render": "failures"}), stage1)
+
+
+@pytest.mark.sim
+def test_review_videos_of_both_cameras_at_256_px_leave_the_states_byte_identical(env, tmp_path):
+    # videos are rendered from the logged states afterwards: neither the episode's states nor
+    # the next episode's depend on what (or whether) was rendered
+    got = []
+    for name, video in (("none", {"render": "none"}),
+                        ("both256", {"cameras": ["agentview", "robot0_eye_in_hand"], "resolution": 256,
+                                     "render": "all"}),
+                        ("after", {"render": "none"})):
+        cfg = _cfg(tmp_path / name, video={"fps": 5, **video})
+        (unit,) = plan_units(cfg)
+        rec = run_one(env, DriftPolicy(), unit, cfg, tmp_path / name / "stage1")
+        got.append((tmp_path / name / "stage1" / rec.path / "states.npy").read_bytes())
+        assert bool(rec.videos) == (name == "both256")
+    assert got[0] == got[1] == got[2]
