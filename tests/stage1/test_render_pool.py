@@ -34,6 +34,16 @@ def _cfg(tmp_path, init_states=(4,)) -> Config:
     })
 
 
+@pytest.fixture(autouse=True)
+def _no_render_process_left():
+    """run_shard starts a render process in this (pytest) process: stop it after each test, so
+    no other test mistakes it for one of its own spawned workers."""
+    yield
+    if worker._RENDER is not None:
+        worker._RENDER.close()
+        worker._RENDER = None
+
+
 def _files(folder) -> dict[str, bytes]:
     return {p.name: p.read_bytes() for p in sorted(folder.iterdir())}
 
