@@ -14,7 +14,12 @@ states.npy, steps.parquet, agentview + wrist MP4 at --fps, frames.parquet):
               rendered from the logged states at --fps, at standard quality (LIBERO's
               look) and at fast quality (the stage default: no MSAA, no reflections;
               mean pixel difference 1.4/255), and with the stage's default render:
-              failures, which skips the videos of successes
+              failures, which skips the videos of successes; all of these render in
+              this process after the physics (`run_one`), one core
+  ours, render process   the stage's real path (`run_shard`, as a worker runs it): videos
+              drawn by the worker's render process while the next episode's physics runs
+              (pipeline/stage1/render_pool.py), at fast quality, all videos and failures
+              only; this uses the second core
   naive       LIBERO's usual loop: `OffScreenRenderEnv` renders both cameras at every step;
               the frames at --fps go into the same videos
 These run in this process on one prebuilt environment per mode (environment build
@@ -47,7 +52,8 @@ from pipeline.sim.env import _quiet  # noqa: E402
 from pipeline.stage1.recorder import EpisodeRecorder  # noqa: E402
 from pipeline.stage1.units import plan_units  # noqa: E402
 from pipeline.stage1.video import frame_steps, write_videos  # noqa: E402
-from pipeline.stage1.worker import run_one  # noqa: E402
+from pipeline.stage1.units import Shard  # noqa: E402
+from pipeline.stage1.worker import run_one, run_shard  # noqa: E402
 
 
 class NaiveLiberoEnv(SimEnv):
@@ -175,8 +181,11 @@ def timed(label: str, fn, units) -> float:
     t0 = time.perf_counter()
     for u in units:
         fn(u)
-    dt = time.perf_counter() - t0
-    print(f"  {label:<28} {dt:8.1f} s  {len(units) / dt * 3600:8.0f} episodes/hour", flush=True)
+    return report(label, time.perf_counter() - t0, len(units))
+
+
+def report(label: str, dt: float, n: int) -> float:
+    print(f"  {label:<28} {dt:8.1f} s  {n / dt * 3600:8.0f} episodes/hour", flush=True)
     return dt
 
 
@@ -215,6 +224,7 @@ def one_core(args, task, cfg, units, tmp: Path) -> None:
     env.fast_step = True
     fail_cfg = video(quality="fast", render="failures")
     t_fail = timed("ours, default (failure videos)", lambda u: run_one(env, policy, u, fail_cfg, tmp / "fail"), units)
+    t_pool, t_pool_fail = render_process_modes(units, fast_cfg, fail_cfg, tmp)
     print("other stages that step the simulator (same init states):")
     other_stages(env, policy, units, cfg, tmp)
     env.close()
@@ -226,6 +236,29 @@ def one_core(args, task, cfg, units, tmp: Path) -> None:
           f"MSAA, no reflections), {t_naive / t_fail:.2f}x with videos of failures only; "
           f"ours (fast) is {t_ours / t_floor:.2f}x the physics-only floor; the fast step made the floor "
           f"{t_floor_old / t_floor:.2f}x and ours {t_ours_old / t_ours:.2f}x faster")
+    print(f"  with the render process (the stage's path): naive / ours {t_naive / t_pool:.2f}x at fast quality, "
+          f"{t_naive / t_pool_fail:.2f}x with videos of failures only; ours is {t_pool / t_floor:.2f}x the "
+          f"physics-only floor ({t_pool_fail / t_floor:.2f}x with failure videos only); the render process made "
+          f"ours {t_ours / t_pool:.2f}x faster than rendering after the physics")
+
+
+def render_process_modes(units, fast_cfg, fail_cfg, tmp: Path) -> tuple[float, float]:
+    """`run_shard` in this process, as a worker runs it: its cached environment and render
+    process are warmed by one episode first (build excluded, like the other modes)."""
+    from pipeline.stage1 import worker
+
+    def shard(cfg, units, folder) -> None:
+        run_shard((Shard(tuple(units)), cfg.model_dump(mode="json"), str(tmp / folder), None), lambda ev: None)
+
+    shard(fast_cfg, units[:1], "warm")
+    out = []
+    for label, cfg in (("ours, render process", fast_cfg), ("ours, render process, failures", fail_cfg)):
+        t0 = time.perf_counter()
+        shard(cfg, units, label.replace(" ", "_").replace(",", ""))
+        out.append(report(label, time.perf_counter() - t0, len(units)))
+    worker._RENDER.close()
+    worker._RENDER = None
+    return out[0], out[1]
 
 
 

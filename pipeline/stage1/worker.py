@@ -4,12 +4,14 @@ Inputs: a `Shard`, the run's `Config` (as a dict, so it pickles cheaply), an opt
 policy factory (tests; default `make_policy`), and `emit` for progress events.
 Outputs per episode, in `stage1/<episode folder>/`: `states.npy`, `steps.parquet`, videos
 and `frames.parquet` when rendered, `truth.parquet` when the policy keeps a truth log
-(the scripted generator: `pipeline.policies.scripted.truth`); then the done marker `stage1/_done/<unit_id>.done`
-holding the EpisodeRecord (JSON).
+(the scripted generator: `pipeline.policies.scripted.truth`); then the done marker
+`stage1/_done/<unit_id>.done` holding the EpisodeRecord (JSON). The videos are drawn by the
+worker's render process (render_pool.py) while the physics of the next episodes runs.
 
 Invariants: an episode is `reset_to_init(i)`, `settle(settle_steps)` (zero actions, gripper
 open), `policy.reset(task, seed)`, then `run_episode`; the done marker is written last,
-after every output, so a killed episode is redone (from an emptied folder) on rerun and a
+after every output (videos included: an episode waiting for its videos has no marker),
+so a killed episode is redone (from an emptied folder) on rerun and a
 done one is never redone. The environment (and the policy) live across the shards a
 worker process runs (`EnvCache`); an exception in one episode is recorded as an `error`
 event and the shard goes on, except `FatalError`, which stops the run.
@@ -23,6 +25,7 @@ import traceback
 from collections.abc import Callable
 from pathlib import Path
 
+import numpy as np
 import pyarrow.parquet as pq
 
 from pipeline.atomic import Completions, write_text, write_with
@@ -33,6 +36,7 @@ from pipeline.records import EpisodeRecord
 from pipeline.rollout import run_episode
 from pipeline.sim import EnvCache, SimEnv
 from pipeline.stage1.recorder import EpisodeRecorder
+from pipeline.stage1.render_pool import RenderProcess
 from pipeline.stage1.units import EpisodeUnit, Shard
 from pipeline.stage1.video import render_videos
 
@@ -40,6 +44,17 @@ PolicyFactory = Callable[[PolicyConfig], Policy]
 
 _ENVS: EnvCache | None = None
 _POLICY: tuple[str, Policy] | None = None
+_RENDER: RenderProcess | None = None
+
+
+def _render_process() -> RenderProcess:
+    """The worker's render process, started on first use and restarted if it died."""
+    global _RENDER
+    if _RENDER is None or not _RENDER.alive:
+        if _RENDER is not None:
+            _RENDER.close()
+        _RENDER = RenderProcess()
+    return _RENDER
 
 
 def _env(unit: EpisodeUnit) -> SimEnv:
@@ -69,8 +84,10 @@ def should_render(mode: str, success: bool) -> bool:
     return mode == "all" or (mode == "failures" and not success)
 
 
-def run_one(env: SimEnv, policy: Policy, unit: EpisodeUnit, cfg: Config, stage1_dir: Path) -> EpisodeRecord:
-    """Run, record and (maybe) render one episode; write its outputs (not its marker)."""
+def run_physics(env: SimEnv, policy: Policy, unit: EpisodeUnit, cfg: Config,
+                stage1_dir: Path) -> tuple[EpisodeRecord, np.ndarray | None]:
+    """Run and record one episode; write its states and step log. Returns its record
+    (without videos) and, if it needs videos, its states (render them, then fill `videos`)."""
     r, v = cfg.stage1.rollout, cfg.stage1.video
     folder = stage1_dir / unit.rel_dir
     if folder.exists():  # leftovers of an attempt killed before its marker
@@ -93,10 +110,7 @@ def run_one(env: SimEnv, policy: Policy, unit: EpisodeUnit, cfg: Config, stage1_
     truth = policy.truth_table() if hasattr(policy, "truth_table") else None
     if truth is not None:
         write_with(folder / "truth.parquet", lambda p: pq.write_table(truth, p))
-    videos: dict[str, str] = {}
-    if should_render(v.render, result.success):
-        videos = render_videos(env, rec.states_array(), folder, list(v.cameras), v.fps, v.resolution, v.quality)
-    return EpisodeRecord(
+    record = EpisodeRecord(
         suite=unit.suite,
         task=unit.task,
         task_index=unit.task_index,
@@ -117,33 +131,81 @@ def run_one(env: SimEnv, policy: Policy, unit: EpisodeUnit, cfg: Config, stage1_
         wall_time_s=round(wall, 4),
         state_dim=env.state_dim,
         path=unit.rel_dir,
-        videos=videos,
-        video_fps=v.fps if videos else None,
     )
+    return record, rec.states_array() if should_render(v.render, result.success) else None
+
+
+def with_videos(record: EpisodeRecord, videos: dict[str, str], fps: int) -> EpisodeRecord:
+    return record.model_copy(update={"videos": videos, "video_fps": fps if videos else None})
+
+
+def run_one(env: SimEnv, policy: Policy, unit: EpisodeUnit, cfg: Config, stage1_dir: Path) -> EpisodeRecord:
+    """Run, record and (maybe) render one episode in this process; write its outputs (not
+    its marker). `run_shard` renders in its render process instead (same files)."""
+    v = cfg.stage1.video
+    record, states = run_physics(env, policy, unit, cfg, stage1_dir)
+    if states is None:
+        return record
+    videos = render_videos(env, states, stage1_dir / unit.rel_dir, list(v.cameras), v.fps, v.resolution, v.quality)
+    return with_videos(record, videos, v.fps)
 
 
 def run_shard(job: tuple[Shard, dict, str, PolicyFactory | None], emit) -> int:
-    """Executor entry point: run the shard's pending episodes; return how many were run."""
+    """Executor entry point: run the shard's pending episodes; return how many were run.
+    Videos render in the worker's render process while the next episodes run; every
+    episode's marker is written once its videos are back, all before this returns."""
     shard, cfg_dict, stage1_dir, factory = job
     cfg = Config.model_validate(cfg_dict)
+    v = cfg.stage1.video
     stage1 = Path(stage1_dir)
     done = Completions(stage1)
+    pending = [u for u in shard.units if not done.is_done(u.unit_id)]
+    renders = _render_process() if pending and v.render != "none" else None  # spawns while the env builds
+    waiting: dict[str, tuple[EpisodeUnit, EpisodeRecord]] = {}
     ran = 0
-    for unit in shard.units:
-        if done.is_done(unit.unit_id):
-            continue
-        try:
-            env = _env(unit)
-            record = run_one(env, _policy(cfg.stage1.policy, factory), unit, cfg, stage1)
-        except FatalError:
-            raise
-        except Exception as e:  # one episode's failure must not cost the others
-            detail = traceback.format_exc()
-            write_text(stage1 / "errors" / f"{unit.unit_id}.txt", detail)
-            emit({"kind": "error", "unit": unit.unit_id, "reason": type(e).__name__, "detail": str(e)})
-            continue
+
+    def fail(unit: EpisodeUnit, reason: str, detail: str, text: str) -> None:
+        write_text(stage1 / "errors" / f"{unit.unit_id}.txt", text)
+        emit({"kind": "error", "unit": unit.unit_id, "reason": reason, "detail": detail})
+
+    def finish(unit: EpisodeUnit, record: EpisodeRecord) -> None:
+        nonlocal ran
         done.mark_done(unit.unit_id, record.model_dump(mode="json"))
         (stage1 / "errors" / f"{unit.unit_id}.txt").unlink(missing_ok=True)
         ran += 1
         emit({"kind": "episode", "unit": unit.unit_id, "success": record.success, "steps": record.steps})
+
+    def collect(wait: bool) -> None:
+        for ticket, videos, error in renders.results(wait) if renders is not None else []:
+            unit, record = waiting.pop(ticket)
+            if error is None:
+                finish(unit, with_videos(record, videos, v.fps))
+            else:
+                fail(unit, "RenderError", error.strip().splitlines()[-1], error)
+
+    try:
+        for unit in pending:
+            try:
+                env = _env(unit)
+                if renders is not None and not renders.alive:  # fail what it held, take a fresh one
+                    collect(wait=False)
+                    renders = _render_process()
+                if renders is not None:
+                    renders.prepare(env, v.resolution, v.quality)  # model loads during the physics
+                record, states = run_physics(env, _policy(cfg.stage1.policy, factory), unit, cfg, stage1)
+                if states is not None:
+                    renders.submit(unit.unit_id, env, states, stage1 / unit.rel_dir, list(v.cameras), v.fps,
+                                   v.resolution, v.quality)
+            except FatalError:
+                raise
+            except Exception as e:  # one episode's failure must not cost the others
+                fail(unit, type(e).__name__, str(e), traceback.format_exc())
+                continue
+            if states is None:
+                finish(unit, record)
+            else:
+                waiting[unit.unit_id] = (unit, record)
+            collect(wait=False)
+    finally:
+        collect(wait=True)  # also on a fatal error: finished videos still get their markers
     return ran

@@ -1,0 +1,103 @@
+"""Videos from the worker's render process are the in-process videos, byte for byte, and an
+episode whose videos never came back gets no done marker.
+
+The wrist camera is compared by picture, not bytes: rendering it in the worker itself (the
+old path) is not byte-reproducible between two runs of the same code (measured: two
+identical runs gave different wrist MP4s, same agentview MP4s)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pipeline.stage1.video import read_video
+
+from pipeline.atomic import Completions
+from pipeline.config import Config
+from pipeline.stage1 import worker
+from pipeline.stage1.units import make_shards, plan_units
+from pipeline.stage1.worker import run_one, run_shard
+from toy_policy import DriftPolicy, make
+
+CAMERAS = ["agentview", "robot0_eye_in_hand"]
+
+
+def _cfg(tmp_path, init_states=(4,)) -> Config:
+    return Config.model_validate({
+        "run": {"output_dir": str(tmp_path), "seed": 1},
+        "tasks": {"suites": ["libero_spatial"], "max_tasks_per_suite": 1, "init_states": list(init_states)},
+        "stage1": {
+            "policy": {"name": "drift"},
+            "rollout": {"horizon": 13, "chunk_size": 4, "settle_steps": 3},
+            "video": {"cameras": CAMERAS, "fps": 5, "resolution": 64, "render": "all", "quality": "fast"},
+        },
+    })
+
+
+@pytest.fixture(autouse=True)
+def _no_render_process_left():
+    """run_shard starts a render process in this (pytest) process: stop it after each test, so
+    no other test mistakes it for one of its own spawned workers."""
+    yield
+    if worker._RENDER is not None:
+        worker._RENDER.close()
+        worker._RENDER = None
+
+
+def _files(folder) -> dict[str, bytes]:
+    return {p.name: p.read_bytes() for p in sorted(folder.iterdir())}
+
+
+@pytest.mark.sim
+def test_render_process_writes_the_same_bytes_as_rendering_in_the_worker(tmp_path):
+    cfg = _cfg(tmp_path, init_states=(4, 5))
+    units = plan_units(cfg)
+    inline = tmp_path / "inline"
+    for u in units:  # the in-process path on the worker's own (cached) environment
+        run_one(worker._env(u), DriftPolicy(), u, cfg, inline)
+    stage1 = tmp_path / "stage1"
+    events = []
+    (shard,) = make_shards(units, workers=1)
+    assert run_shard((shard, cfg.model_dump(mode="json"), str(stage1), make), events.append) == 2
+    done = Completions(stage1)
+    for u in units:
+        ours = _files(stage1 / u.rel_dir)
+        assert set(ours) == {"states.npy", "steps.parquet", "frames.parquet", *(f"video_{c}.mp4" for c in CAMERAS)}
+        theirs = _files(inline / u.rel_dir)
+        wrist = "video_robot0_eye_in_hand.mp4"
+        assert {k: v for k, v in ours.items() if k != wrist} == {k: v for k, v in theirs.items() if k != wrist}
+        a, b = (np.asarray(read_video(d / u.rel_dir / wrist), dtype=float) for d in (stage1, inline))
+        assert a.shape == b.shape and np.abs(a - b).mean() < 3
+        assert done.is_done(u.unit_id)
+    assert [e["kind"] for e in events] == ["episode", "episode"]
+
+
+@pytest.mark.sim
+def test_an_episode_whose_render_process_died_is_left_unmarked_redone_on_rerun_and_the_next_is_served(tmp_path, monkeypatch):
+    cfg = _cfg(tmp_path, init_states=(4, 5))
+    units = plan_units(cfg)
+    stage1 = tmp_path / "stage1"
+    submit = worker.RenderProcess.submit
+    killed = []
+
+    def submit_then_die(self, ticket, *a, **kw):
+        submit(self, ticket, *a, **kw)
+        if not killed:  # the first episode's renderer dies before answering
+            killed.append(ticket)
+            self._proc.kill()
+            self._proc.join()
+
+    monkeypatch.setattr(worker.RenderProcess, "submit", submit_then_die)
+    events = []
+    (shard,) = make_shards(units, workers=1)
+    run_shard((shard, cfg.model_dump(mode="json"), str(stage1), make), events.append)
+    done = Completions(stage1)
+    first, second = units
+    assert killed == [first.unit_id] and not done.is_done(first.unit_id)
+    assert (stage1 / "errors" / f"{first.unit_id}.txt").read_text().startswith("render process died")
+    assert done.is_done(second.unit_id)  # a fresh render process took the next episode
+    assert np.load(stage1 / second.rel_dir / "states.npy").shape[0] == 14
+    assert sorted(e["kind"] for e in events) == ["episode", "error"]
+    # the rerun redoes the unmarked episode only, videos included
+    assert run_shard((shard, cfg.model_dump(mode="json"), str(stage1), make), events.append) == 1
+    assert done.is_done(first.unit_id) and (stage1 / first.rel_dir / "video_agentview.mp4").exists()
