@@ -1,6 +1,7 @@
 """Ray executor: the same contract on a Ray cluster (`executor.kind: ray`).
 
-`ray_address` comes from the config (None starts or joins a local Ray). Events travel
+`ray_address` comes from the config (None starts a fresh local Ray instance; give the
+address to join a running cluster). Events travel
 through a `ray.util.queue.Queue`, an actor pinned to the driver's node so that losing a
 worker node never loses it. This is the only module that imports ray, and only inside
 methods, so the rest of the project runs without it installed.
@@ -59,7 +60,9 @@ class RayExecutor(Executor):
             return []
         started = not ray.is_initialized()
         if started:
-            kwargs = {"address": self.address} if self.address else {"num_cpus": self.workers}
+            # "local": a fresh instance, never one found by address file (a cluster still shutting
+            # down from the previous run, which would refuse num_cpus)
+            kwargs = {"address": self.address} if self.address else {"address": "local", "num_cpus": self.workers}
             # runtime_env sets the variables before the worker process starts (Mesa reads them once)
             ray.init(**kwargs, runtime_env={"env_vars": self.worker_env or {}}, log_to_driver=False)
         lost_worker = _lost_worker_errors(ray)
