@@ -255,30 +255,16 @@ def _(_tmp):
     return "exit 0, no 'Exception ignored in GLContext.__del__' in its output"
 
 
-def _spawned_children() -> list[int]:
-    out = []
-    for task in Path(f"/proc/{os.getpid()}/task").iterdir():
-        for pid in (task / "children").read_text().split():
-            try:
-                if b"spawn_main" in Path(f"/proc/{pid}/cmdline").read_bytes():
-                    out.append(int(pid))
-            except FileNotFoundError:
-                pass
-    return out
-
-
 @case("local executor: kill -9 of one stage-1 worker", slow=True)
 def _(tmp):
     import io
     import json
-    import signal
-    import threading
-    import time
 
     from rich.console import Console
 
     from pipeline.config import Config
     from pipeline.stage1.run import run
+    from tests.executors.killer import kill_a_worker_after_the_first_episode
 
     cfg = Config.model_validate({
         "run": {"name": "kill9", "output_dir": str(tmp / "run")},
@@ -286,17 +272,7 @@ def _(tmp):
         "stage1": {"rollout": {"horizon": 40}, "video": {"render": "none"}},
     })
     stage1 = tmp / "run" / "stage1"
-    killed = []
-
-    def kill_a_worker_mid_shard() -> None:
-        deadline = time.time() + 300
-        while time.time() < deadline and not list((stage1 / "_done").glob("*.done")):
-            time.sleep(0.05)
-        killed.append(_spawned_children()[0])
-        os.kill(killed[0], signal.SIGKILL)
-
-    killer = threading.Thread(target=kill_a_worker_mid_shard, daemon=True)
-    killer.start()
+    killer, killed = kill_a_worker_after_the_first_episode(stage1 / "_done")
     result = run(cfg, console=Console(file=io.StringIO()))
     killer.join()
     report = json.loads((stage1 / "summary.json").read_text())["executor"]

@@ -4,11 +4,7 @@ from __future__ import annotations
 
 import io
 import json
-import os
-import signal
 import sys
-import threading
-import time
 from pathlib import Path
 
 import pytest
@@ -20,21 +16,9 @@ from pipeline.stage1.run import run
 
 sys.path.insert(0, str(Path(__file__).parents[1] / "stage1"))
 import toy_policy  # noqa: E402
+from killer import kill_a_worker_after_the_first_episode  # noqa: E402
 
 N_EPISODES = 6
-
-
-def _workers() -> list[int]:
-    """This process's spawned pool workers (not multiprocessing's resource tracker)."""
-    out = []
-    for task in Path(f"/proc/{os.getpid()}/task").iterdir():
-        for pid in (task / "children").read_text().split():
-            try:
-                if b"spawn_main" in Path(f"/proc/{pid}/cmdline").read_bytes():
-                    out.append(int(pid))
-            except FileNotFoundError:
-                pass
-    return out
 
 
 @pytest.mark.sim
@@ -49,19 +33,7 @@ def test_a_stage1_worker_killed_mid_episode_costs_no_episode(tmp_path):
                    "video": {"render": "none"}},
     })
     done_dir = tmp_path / "run" / "stage1" / "_done"
-    killed: list[int] = []
-
-    def kill_one_after_the_first_episode() -> None:
-        deadline = time.time() + 300
-        while time.time() < deadline and not list(done_dir.glob("*.done")):
-            time.sleep(0.05)
-        # two shards of three: both workers are inside their shard now
-        pid = _workers()[0]
-        os.kill(pid, signal.SIGKILL)
-        killed.append(pid)
-
-    killer = threading.Thread(target=kill_one_after_the_first_episode, daemon=True)
-    killer.start()
+    killer, killed = kill_a_worker_after_the_first_episode(done_dir)
     result = run(cfg, policy_factory=toy_policy.make, console=Console(file=io.StringIO()))
     killer.join()
     assert killed
