@@ -63,6 +63,16 @@ def atomic_open(path: str | Path, mode: str = "w") -> Iterator[IO]:
             yield f
 
 
+def file_stamp(path: Path) -> str:
+    """`size:mtime_ns` of an input file ("missing" when it cannot be stat'ed): what a done
+    marker records of it, so that a changed file makes its unit run again."""
+    try:
+        st = Path(path).stat()
+    except OSError:
+        return "missing"
+    return f"{st.st_size}:{st.st_mtime_ns}"
+
+
 class Completions:
     """Done-markers for units of work, one empty file each, under `<root>/_done/`."""
 

@@ -11,6 +11,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from pipeline.atomic import file_stamp
 from pipeline.errors import EpisodeError
 from pipeline.records import EpisodeRecord
 
@@ -136,9 +137,5 @@ def fingerprint(stage1: Path, rec: EpisodeRecord) -> dict[str, str]:
 
     out = {"manifest_row": hashlib.sha256(rec.model_dump_json().encode()).hexdigest()[:16]}
     for p in input_files(stage1, rec):
-        try:
-            st = p.stat()
-            out[p.name] = f"{st.st_size}:{st.st_mtime_ns}"
-        except OSError:
-            out[p.name] = "missing"
+        out[p.name] = file_stamp(p)
     return out

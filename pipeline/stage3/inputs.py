@@ -22,6 +22,7 @@ from pathlib import Path
 
 from pydantic import ValidationError
 
+from pipeline.atomic import file_stamp
 from pipeline.records import Localization, QuarantineEntry
 from pipeline.sim.render import CAMERAS
 
@@ -58,8 +59,7 @@ def fingerprint(run_dir: Path, unit: Unit) -> str:
     suite, task, ep = unit.key.split("/", 2)
     ev = run_dir / "stage2" / "evidence" / suite / task / f"{ep}.parquet"
     if ev.is_file():
-        st = ev.stat()
-        h.update(f"{st.st_size}:{st.st_mtime_ns}".encode())
+        h.update(file_stamp(ev).encode())
     return h.hexdigest()[:16]
 
 
