@@ -17,11 +17,10 @@ from __future__ import annotations
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from pipeline.records import step_at_time
 from pipeline.review import audit
 from pipeline.review.db import ADJUDICATING, CONFLICT, FINAL, Adjudication, Item, Review, User, now
 from pipeline.review.errors import Forbidden, Invalid, Stale
-from pipeline.review.fields import FieldError, validate_field
+from pipeline.review.fields import FieldError, snap_step, validate_field
 from pipeline.review.workflow import QueueSettings, get_item
 
 CLAIM_SECONDS = 1800
@@ -82,7 +81,7 @@ def adjudicate(s: Session, user: User, item_id: int, body: dict, cfg: QueueSetti
         item.final, item.resolution = None, "excluded"
     else:
         final = {**(item.agreed or {}), **values}
-        final["fail_step"] = step_at_time(final["fail_time_s"], (item.context or {}).get("control_hz", cfg.control_hz))
+        final["fail_step"] = snap_step(final["fail_time_s"], (item.context or {}).get("control_hz", cfg.control_hz))
         item.final, item.resolution = final, "adjudicated"
     item.status, item.adjudicator_id, item.adjudication_lease_until = FINAL, user.id, None
     item.finalized_at, item.version = now(), item.version + 1

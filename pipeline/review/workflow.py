@@ -139,8 +139,12 @@ _last_sweep: dict[str, float] = {}  # database URL -> time of the last sweep
 SWEEP_EVERY_S = 5.0
 
 
+def _sweep_key(s: Session) -> str:
+    return s.get_bind().url.render_as_string(hide_password=True)
+
+
 def sweep_due(s: Session, t: float) -> bool:
-    return t - _last_sweep.get(s.get_bind().url.render_as_string(hide_password=True), 0.0) >= SWEEP_EVERY_S
+    return t - _last_sweep.get(_sweep_key(s), 0.0) >= SWEEP_EVERY_S
 
 
 def lease_next(s: Session, user: User, cfg: QueueSettings) -> Item | None:
@@ -150,7 +154,7 @@ def lease_next(s: Session, user: User, cfg: QueueSettings) -> Item | None:
     # statuses, so it need not run on every request
     if sweep_due(s, t):
         expire(s, t)
-        _last_sweep[s.get_bind().url.render_as_string(hide_password=True)] = t
+        _last_sweep[_sweep_key(s)] = t
     held = s.scalar(
         select(Item).join(Lease, Lease.item_id == Item.id)
         .where(Lease.user_id == user.id, Lease.expires_at > t, Item.status.in_(COLLECTING), ~_reviewed_by(user.id),
