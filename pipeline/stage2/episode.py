@@ -32,7 +32,7 @@ from pipeline.records import EpisodeRecord, Localization, QuarantineEntry
 from pipeline.stage2.history import build_history, render_frames, write_history
 from pipeline.stage2.layout import Stage2Paths, load_episode
 from pipeline.stage2.phases import settled_step, split_phases, step_for_time
-from pipeline.stage2.scenes import scene_stem, write_scene
+from pipeline.stage2.scenes import write_scene
 from pipeline.stage2.simstate import localize
 
 
@@ -114,9 +114,10 @@ def process_episode(env, rec: EpisodeRecord, stage1: Path, paths: Stage2Paths, c
         hist = build_history(ep.states, ep.steps, onset, cfg.history_frames, cfg.history_stride_steps,
                              rec.control_hz)
         frames = render_frames(env, hist, list(cfg.history_cameras), cfg.history_resolution)
-        hist_path = bddl.parent / f"{scene_stem(scene_step)}_history.npz"
+        scene = paths.scene(rec.key, scene_step)
+        hist_path = scene.history
         write_history(hist_path, hist)
-        write_history(bddl.parent / f"{scene_stem(scene_step)}_history_frames.npz", frames)
+        write_history(scene.history_frames, frames)
         history_rel = str(hist_path.relative_to(paths.root))
     loc = Localization(
         key=rec.key, suite=rec.suite, task=rec.task, episode_id=rec.episode_id, instruction=rec.instruction,

@@ -21,12 +21,14 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from pipeline.atomic import write_json, write_with
+from pipeline.layout import Stage2Layout
 from pipeline.records import Localization, QuarantineEntry
 
 
 def load_outputs(stage2: Path) -> tuple[list[Localization], list[QuarantineEntry]]:
-    locs = [Localization.model_validate_json(p.read_text()) for p in sorted((stage2 / "localizations").rglob("*.json"))]
-    quar = [QuarantineEntry.model_validate_json(p.read_text()) for p in sorted((stage2 / "quarantine").rglob("*.json"))]
+    paths = Stage2Layout(Path(stage2))
+    locs = [Localization.model_validate_json(p.read_text()) for p in sorted(paths.localizations_dir.rglob("*.json"))]
+    quar = [QuarantineEntry.model_validate_json(p.read_text()) for p in sorted(paths.quarantine_dir.rglob("*.json"))]
     return locs, quar
 
 
@@ -52,7 +54,7 @@ def write_agreement(stage2: Path, locs: list[Localization]) -> dict | None:
     result = agreement(pairs).model_dump()
     result.update(vlm_localized=len(vlm), simstate_missing=len(vlm) - len(pairs),
                   sources=sorted({f"{loc.source}:{loc.model}" for loc in vlm}))
-    write_json(stage2 / "agreement.json", result)
+    write_json(Stage2Layout(Path(stage2)).agreement, result)
     import matplotlib
 
     matplotlib.use("Agg")
@@ -68,7 +70,7 @@ def write_agreement(stage2: Path, locs: list[Localization]) -> dict | None:
     mae = "n/a" if result["mae_s"] is None else f"{result['mae_s']:.2f} s"
     ax.set_title(f"n={result['n']}  MAE={mae}")
     fig.tight_layout()
-    write_with(stage2 / "agreement.png", lambda p: fig.savefig(p, format="png"))
+    write_with(Stage2Layout(Path(stage2)).agreement_figure, lambda p: fig.savefig(p, format="png"))
     plt.close(fig)
     return result
 
@@ -76,7 +78,7 @@ def write_agreement(stage2: Path, locs: list[Localization]) -> dict | None:
 def write_reports(stage2: Path) -> dict:
     locs, quar = load_outputs(stage2)
     table = localization_table(locs)
-    write_with(stage2 / "localizations.parquet", lambda p: pq.write_table(table, p))
+    write_with(Stage2Layout(Path(stage2)).localizations_table, lambda p: pq.write_table(table, p))
     summary = {
         "scenes": len(locs),
         "quarantined": len(quar),
@@ -88,5 +90,5 @@ def write_reports(stage2: Path) -> dict:
         "onset_kinds": dict(Counter(r for r in table.column("onset_kind").to_pylist()) if locs else {}),
         "agreement": write_agreement(stage2, locs),
     }
-    write_json(stage2 / "summary.json", summary)
+    write_json(Stage2Layout(Path(stage2)).summary, summary)
     return summary

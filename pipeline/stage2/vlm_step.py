@@ -18,6 +18,7 @@ from pathlib import Path
 
 from pipeline.atomic import write_json
 from pipeline.config import Config
+from pipeline.layout import RunLayout
 from pipeline.records import EpisodeRecord
 from pipeline.stage2.layout import Stage2Paths
 
@@ -54,7 +55,7 @@ def run_vlm(cfg: Config, episodes: list[EpisodeRecord], paths: Stage2Paths,
 
     from pipeline.vlm.backends import VLMRequest, make_backend
 
-    stage1 = cfg.out / "stage1"
+    stage1 = RunLayout.of(cfg).stage1
     todo = [r for r in episodes if not paths.abs(paths.vlm(r)).exists()]
     if not todo:
         return 0
@@ -64,20 +65,20 @@ def run_vlm(cfg: Config, episodes: list[EpisodeRecord], paths: Stage2Paths,
         for i in range(0, len(todo), BATCH):
             batch, requests, frames = [], [], {}
             for rec in todo[i : i + BATCH]:
-                folder = stage1 / rec.path
-                video = rec.videos.get("agentview")
-                if not video or not (folder / video).exists():
+                folder = stage1.episode(rec).dir
+                video = stage1.video(rec, "agentview")
+                if video is None or not video.exists():
                     write_json(paths.abs(paths.vlm(rec)), {"source": backend.name, "reason": "no_video",
                                                            "detail": f"no agentview video in {folder}"})
                     continue
-                fp = folder / "frames.parquet"
+                fp = stage1.episode(rec).frames
                 try:
                     frames[rec.key] = pq.read_table(fp) if fp.exists() else None
                 except (pa.ArrowException, OSError) as e:  # truncated: the episode worker sets it aside
                     write_json(paths.abs(paths.vlm(rec)), {"source": backend.name, "reason": "stage1_bad_frames",
                                                            "detail": f"{fp}: unreadable ({e})"})
                     continue
-                requests.append(VLMRequest(task="localize", video=Path(folder / video), instruction=rec.instruction,
+                requests.append(VLMRequest(task="localize", video=video, instruction=rec.instruction,
                                            frames_table=frames[rec.key], key=rec.key))
                 batch.append(rec)
             results = backend.run(requests, progress=(lambda _r: on_result()) if on_result else None)
