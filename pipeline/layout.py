@@ -51,16 +51,23 @@ def episode_key(suite: str, task: str, episode_id: str) -> str:
 
 
 def parse_key(key: str) -> tuple[str, str, str]:
-    """(suite, task, episode_id) of a key; ValueError naming the key when it has not three parts."""
-    parts = key.split("/")
-    if len(parts) != 3 or not all(parts):
+    """(suite, task, episode_id) of a key; ValueError naming the key when it has fewer than
+    three parts (a slash past the second stays in the episode id: a hand-made stage-2 file
+    with one must not stop stage 3, which sets it aside by its path)."""
+    parts = key.split("/", 2)
+    if len(parts) != 3:
         raise ValueError(f"episode key {key!r} is not <suite>/<task>/<episode_id>")
     return parts[0], parts[1], parts[2]
 
 
+def is_key(key: str) -> bool:
+    """Exactly three parts, as `episode_key` builds them."""
+    return key.count("/") == 2
+
+
 def unit_id(key: str) -> str:
     """Flat, file-safe name of an episode (done markers): `<suite>__<task>__<episode_id>`."""
-    return "__".join(parse_key(key))
+    return key.replace("/", "__")
 
 
 def key_of_unit(uid: str) -> str:

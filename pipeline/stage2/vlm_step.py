@@ -14,7 +14,6 @@ The episode workers read these files (pipeline/stage2/worker.py). Requests go in
 from __future__ import annotations
 
 from collections.abc import Callable
-from pathlib import Path
 
 from pipeline.atomic import write_json
 from pipeline.config import Config

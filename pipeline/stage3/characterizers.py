@@ -12,13 +12,14 @@ raw text, never an exception; a misconfiguration (no model, bad prompt) raises b
 from __future__ import annotations
 
 from collections.abc import Callable
-from pathlib import Path
 
 from pipeline.config import Config
 from pipeline.errors import EpisodeError
+from pipeline.layout import RunLayout
 from pipeline.records import Characterization, Localization, QuarantineEntry
 
 Outcome = Characterization | QuarantineEntry
+CAMERA = "agentview"  # the camera the VLM sees, as in stage 2 (stage2.vlm_step)
 
 
 def _quarantine(loc: Localization, source: str, reason: str, detail: str, raw: str | None = None,
@@ -35,12 +36,12 @@ class SimstateCharacterizer:
         from pipeline.evidence import read_evidence
 
         self._characterize, self._read = simstate.characterize, read_evidence
-        self.run_dir = Path(cfg.out)
+        self.layout = RunLayout.of(cfg)
 
     def __call__(self, locs: list[Localization], progress: Callable[[], None] | None = None) -> list[Outcome]:
         out: list[Outcome] = []
         for loc in locs:
-            path = self.run_dir / "stage2" / "evidence" / loc.suite / loc.task / f"{loc.episode_id}.parquet"
+            path = self.layout.stage2.evidence_of_key(loc.key)
             try:
                 if not path.is_file():
                     raise EpisodeError("missing_evidence", f"{path}: no such file")
@@ -60,7 +61,7 @@ class VLMCharacterizer:
 
         self.backend = make_backend(cfg.stage3.vlm)
         self.name = cfg.stage3.vlm.backend
-        self.run_dir = Path(cfg.out)
+        self.layout = RunLayout.of(cfg)
 
     def __call__(self, locs: list[Localization], progress: Callable[[], None] | None = None) -> list[Outcome]:
         import pyarrow.parquet as pq
@@ -72,13 +73,12 @@ class VLMCharacterizer:
         requests, order = [], []
         out: list[Outcome | None] = [None] * len(locs)
         for i, loc in enumerate(locs):
-            suite, task, ep = loc.key.split("/", 2)
-            ep_dir = self.run_dir / "stage1" / "episodes" / suite / task / ep
-            video = ep_dir / "video_agentview.mp4"
+            files = self.layout.stage1.episode_of_key(loc.key)
+            video = files.video(CAMERA)
             if not video.is_file():
                 out[i] = _quarantine(loc, self.name, "missing_video", f"{video}: no such file")
                 continue
-            frames = ep_dir / "frames.parquet"
+            frames = files.frames
             requests.append(VLMRequest(task="characterize", video=video, instruction=loc.instruction,
                                        fail_time_s=loc.fail_time_s, key=loc.key,
                                        frames_table=pq.read_table(frames) if frames.is_file() else None))
