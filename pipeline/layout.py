@@ -25,6 +25,7 @@ Run folder (`run.output_dir`):
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -37,6 +38,9 @@ RESOLVED_CONFIG = "config.resolved.yaml"  # beside each stage's outputs (config.
 SUMMARY = "summary.json"
 MANIFEST = "episodes.parquet"  # stage 1's manifest, and eval's table of trials
 RELEASE_MANIFEST = "scenarios.parquet"
+RELEASE_CARD = "README.md"
+RELEASE_SUMS = "SHA256SUMS"
+RELEASE_BUILD = "_build"  # inside a release folder, outside the released set
 QUARANTINE_LOG = "quarantine.jsonl"
 REPORT = "report.md"
 STATE_SUFFIX = "_sim_state.npy"  # a scene's state file: step_<NNNN>_sim_state.npy
@@ -121,6 +125,22 @@ class SceneFiles:
     def check_scratch(self) -> Path:
         """Where the normalized BDDL is parsed before the pair is written (removed after)."""
         return self.dir / f".{self.stem}.check.bddl"
+
+
+SCENE_GLOB = f"{SCENE_PREFIX}*/*/episode_*/step_*.bddl"  # every scene's BDDL under a tree's root
+_SCENE_RE = re.compile(rf"{SCENE_PREFIX}(?P<suite>[^/]+)/(?P<task>[^/]+)/episode_(?P<ep>[^/]+)/step_(?P<step>\d+)\.bddl$")
+
+
+def parse_scene_bddl(rel: str) -> tuple[str, int] | None:
+    """(episode key, step) of a scene BDDL path (relative to its tree's root), None if the
+    name does not follow the layout."""
+    m = _SCENE_RE.search(rel)
+    return (episode_key(m["suite"], m["task"], m["ep"]), int(m["step"])) if m else None
+
+
+def scene_id(key: str, step: int) -> str:
+    """A scene's id in evaluations: `<key>/step_<NNNN>`."""
+    return f"{key}/{scene_stem(step)}"
 
 
 def scene_dir(root: Path, key: str) -> Path:
@@ -238,6 +258,10 @@ class Stage2Layout:
     def abs(self, rel: Path) -> Path:
         return self.root / rel
 
+    def localization_of_key(self, key: str) -> Path:
+        suite, task, ep = parse_key(key)
+        return self.root / "localizations" / suite / task / f"{ep}.json"
+
     def evidence_of_key(self, key: str) -> Path:
         suite, task, ep = parse_key(key)
         return self.root / "evidence" / suite / task / f"{ep}.parquet"
@@ -332,16 +356,16 @@ class ReleaseLayout:
 
     @property
     def card(self) -> Path:
-        return self.root / "README.md"
+        return self.root / RELEASE_CARD
 
     @property
     def sums(self) -> Path:
-        return self.root / "SHA256SUMS"
+        return self.root / RELEASE_SUMS
 
     @property
     def build_dir(self) -> Path:
         """Not part of the set: build time, quarantined annotations, cache."""
-        return self.root / "_build"
+        return self.root / RELEASE_BUILD
 
     @property
     def quarantine_log(self) -> Path:

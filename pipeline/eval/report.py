@@ -17,6 +17,7 @@ from pathlib import Path
 from pipeline.atomic import write_json, write_text, write_with
 from pipeline.config import SUITES, EvalConfig
 from pipeline.eval import metrics as M
+from pipeline.layout import EvalLayout
 
 LEVELS = ("L1", "L2", "L3", "L4")
 
@@ -181,6 +182,6 @@ def write_report(rows: list[dict], ecfg: EvalConfig, out: str | Path, scenes_dir
         header += "\nProblems (skipped):\n\n" + "".join(f"- {p}\n" for p in problems)
     figs = plots(data, ecfg, out)
     md = markdown(rows, ecfg, data, header) + "".join(f"\n![{f}]({f})\n" for f in figs)
-    write_text(out / "report.md", md)
-    write_json(out / "metrics.json", data)
+    write_text(EvalLayout(out).report, md)
+    write_json(EvalLayout(out).metrics, data)
     return data

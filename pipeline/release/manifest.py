@@ -17,8 +17,9 @@ from pydantic import BaseModel, ConfigDict
 
 from pipeline import SCHEMA_VERSION
 from pipeline.atomic import write_with
+from pipeline.layout import RELEASE_MANIFEST
 
-MANIFEST_NAME = "scenarios.parquet"
+MANIFEST_NAME = RELEASE_MANIFEST
 
 
 class ScenarioRow(BaseModel):
