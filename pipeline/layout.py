@@ -322,6 +322,10 @@ class Stage3Layout:
         return self.root / "review_status.json"
 
     @property
+    def review_confusion(self) -> Path:
+        return self.root / "review_confusion.png"
+
+    @property
     def annotations(self) -> Path:
         """Default export folder of final reviewed annotations."""
         return self.root / "annotations"

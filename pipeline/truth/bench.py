@@ -36,6 +36,7 @@ from pathlib import Path
 from pipeline.atomic import write_json, write_text, write_with
 from pipeline.config import Config
 from pipeline.errors import FatalError
+from pipeline.layout import REPORT, RunLayout
 from pipeline.records import Category, EpisodeRecord, Level, read_episodes
 from pipeline.truth.derive import EpisodeTruth, TruthError, episode_truth
 
@@ -54,14 +55,15 @@ class Prediction:
 
 def load_truths(run_dir: Path) -> tuple[list[EpisodeRecord], dict[str, EpisodeTruth], dict[str, str]]:
     """Failed episodes, their truths, and key -> reason for those set aside."""
-    manifest = run_dir / "stage1" / "episodes.parquet"
+    stage1 = RunLayout(run_dir).stage1
+    manifest = stage1.manifest
     if not manifest.is_file():
         raise FatalError(f"{manifest}: no stage 1 manifest; run `recover stage1` first")
     failed = [r for r in read_episodes(manifest) if not r.success]
     truths, aside = {}, {}
     for rec in failed:
         try:
-            truths[rec.key] = episode_truth(run_dir / "stage1" / rec.path / "truth.parquet", rec.key, rec.control_hz)
+            truths[rec.key] = episode_truth(stage1.episode(rec).truth, rec.key, rec.control_hz)
         except TruthError as e:
             aside[rec.key] = f"{e.reason}: {e}"
     return failed, truths, aside
@@ -72,11 +74,12 @@ def predict_simstate(cfg: Config, records: list[EpisodeRecord]) -> dict[str, Pre
     from pipeline.characterize.simstate import characterize
     from pipeline.evidence import compute_evidence, read_evidence
     from pipeline.records import Localization
-    from pipeline.stage2.layout import Stage2Paths, load_episode
+    from pipeline.stage2.layout import load_episode
     from pipeline.stage2.phases import split_phases
     from pipeline.stage2.simstate import localize
 
-    run_dir, paths = Path(cfg.out), Stage2Paths(Path(cfg.out) / "stage2")
+    layout = RunLayout.of(cfg)
+    paths = layout.stage2
     out: dict[str, Prediction] = {}
     by_task: dict[tuple[str, str], list[EpisodeRecord]] = defaultdict(list)
     for rec in records:
@@ -93,7 +96,7 @@ def predict_simstate(cfg: Config, records: list[EpisodeRecord]) -> dict[str, Pre
                         from pipeline.sim import build_env, get_task
 
                         env = build_env(get_task(suite, task))
-                    ep = load_episode(run_dir / "stage1", rec)
+                    ep = load_episode(layout.stage1.root, rec)
                     ev = compute_evidence(env, ep.states, ep.steps["action"][:, 6], rec.control_hz)
             except Exception as e:  # noqa: BLE001 - one bad episode is a miss, the rest go on
                 out[rec.key] = Prediction(rec.key, reason=f"evidence: {type(e).__name__}: {e}")
@@ -124,23 +127,22 @@ def predict_vlm(cfg: Config, backend_name: str, records: list[EpisodeRecord]) ->
     from pipeline.vlm.parse import parse_characterization
     from pipeline.vlm.schemas import Quarantine
 
-    stage1 = Path(cfg.out) / "stage1"
+    stage1 = RunLayout.of(cfg).stage1
     out: dict[str, Prediction] = {}
     asked, frames = [], {}
     for rec in records:
-        video = rec.videos.get("agentview")
-        folder = stage1 / rec.path
-        if not video or not (folder / video).is_file():
+        video = stage1.video(rec, "agentview")
+        if video is None or not video.is_file():
             out[rec.key] = Prediction(rec.key, reason="no_video")
             continue
-        fp = folder / "frames.parquet"
+        fp = stage1.episode(rec).frames
         frames[rec.key] = pq.read_table(fp) if fp.is_file() else None
         asked.append(rec)
     if not asked:
         return out
     backend = make_backend(cfg.stage2.vlm.model_copy(update={"backend": backend_name}))
     try:
-        reqs = [VLMRequest(task="localize", video=stage1 / r.path / r.videos["agentview"], instruction=r.instruction,
+        reqs = [VLMRequest(task="localize", video=stage1.video(r, "agentview"), instruction=r.instruction,
                            frames_table=frames[r.key], key=r.key) for r in asked]
         located = []
         for rec, res in zip(asked, backend.run(reqs), strict=True):
@@ -151,7 +153,7 @@ def predict_vlm(cfg: Config, backend_name: str, records: list[EpisodeRecord]) ->
             step = step_for_time(float(got["fail_time_s"]), frames[rec.key], rec.steps, rec.control_hz)
             out[rec.key] = Prediction(rec.key, step)
             located.append((rec, float(got["fail_time_s"])))
-        reqs = [VLMRequest(task="characterize", video=stage1 / r.path / r.videos["agentview"],
+        reqs = [VLMRequest(task="characterize", video=stage1.video(r, "agentview"),
                            instruction=r.instruction, fail_time_s=t, frames_table=frames[r.key], key=r.key)
                 for r, t in located]
         for (rec, _), res in zip(located, backend.run(reqs) if reqs else [], strict=True):
@@ -290,9 +292,9 @@ def run(cfg: Config, localizer: str = "simstate", out: Path | None = None) -> di
               "set_aside": len(aside), "set_aside_reasons": dict(Counter(v.split(":")[0] for v in aside.values())),
               **score(truths, preds, hz), "set_aside_episodes": aside,
               "truth": {k: t.model_dump(mode="json") for k, t in truths.items()}}
-    folder = out or run_dir / "bench" / f"localize_{localizer}"
+    folder = out or RunLayout(run_dir).bench(localizer)
     write_json(folder / "report.json", report)
-    write_text(folder / "report.md", markdown(report, localizer, run_dir))
+    write_text(folder / REPORT, markdown(report, localizer, run_dir))
     report["plots"] = [str(folder / f"confusion_{k}.png") for k in ("level", "category")
                        if plot_confusion(folder / f"confusion_{k}.png", f"{localizer}: {k}", report[f"{k}_confusion"])]
     return report
