@@ -23,7 +23,7 @@ from rich.console import Console
 
 from pipeline.atomic import write_bytes, write_json, write_text
 from pipeline.config import Config
-from pipeline.layout import RELEASE_BUILD, RELEASE_CARD, RELEASE_SUMS, STATE_SUFFIX, ReleaseLayout, RunLayout
+from pipeline.layout import RELEASE_BUILD, RELEASE_CARD, RELEASE_SUMS, SCENE_PREFIX, STATE_SUFFIX, ReleaseLayout, RunLayout
 from pipeline.release.card import FIGURE, render_card, write_figure
 from pipeline.release.certify import SceneRef, certify_all
 from pipeline.release.manifest import MANIFEST_NAME, ScenarioRow, sha256_file, write_manifest
@@ -80,7 +80,7 @@ def _row(item: ReleaseItem, out: Path, bddl: str, state: str, history: list[str]
 
 def _remove_stale(out: Path, keep: set[str]) -> int:
     removed = 0
-    for d in out.glob("selected_bddl_scenes_*"):
+    for d in out.glob(f"{SCENE_PREFIX}*"):
         for p in sorted(d.rglob("*"), reverse=True):
             if p.is_file() and p.relative_to(out).as_posix() not in keep:
                 p.unlink()
