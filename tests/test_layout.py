@@ -157,3 +157,53 @@ def test_no_module_outside_the_layout_builds_a_run_path():
         offenders += [f"pipeline/{rel}:{line}: {s!r}" for line, s in hand_built_paths(path.read_text())
                       if (rel, s) not in ALLOWED]
     assert not offenders, "run paths built outside pipeline/layout.py:\n" + "\n".join(offenders)
+
+
+# ---- docs/data-format.md is checked against the layout and the schemas ----------------------
+DOC = PIPELINE.parent / "docs" / "data-format.md"
+
+
+def _doc_rows() -> list[tuple[str, str]]:
+    """(path template, RunLayout call) of every table row that names a call."""
+    rows = []
+    for line in DOC.read_text().splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if len(cells) >= 2 and cells[0].startswith("`") and cells[1].startswith("`"):
+            rows.append((cells[0].strip("`"), cells[1].strip("`")))
+    return rows
+
+
+def test_every_path_in_the_data_format_page_is_the_layouts(tmp_path):
+    import pipeline.layout as layout_module
+
+    rec = _record()
+    suite, task, ep = parse_key(KEY)
+    names = {**{k: v for k, v in vars(layout_module).items() if not k.startswith("_")},
+             "L": RunLayout(tmp_path), "rec": rec, "key": KEY, "camera": "agentview", "step": 42, "uid": "u1",
+             "localizer": "simstate"}
+    fill = {"<key>": KEY, "<suite>": suite, "<task>": task, "<episode_id>": ep, "<camera>": "agentview",
+            "<NNNN>": "0042", "<unit>": "u1", "<localizer>": "simstate"}
+    rows = _doc_rows()
+    assert len(rows) >= 40, f"{DOC}: expected the path tables, found {len(rows)} rows"
+    for template, call in rows:
+        want = template
+        for k, v in fill.items():
+            want = want.replace(k, v)
+        got = eval(call, names).relative_to(tmp_path).as_posix()  # noqa: S307 - our own doc, in a test
+        assert got == want.rstrip("/"), f"{DOC}: row {template!r}: {call} gives {got!r}"
+
+
+def test_the_data_format_page_lists_every_parquet_column():
+    import re
+
+    from pipeline.eval.records import EVAL_SCHEMA
+    from pipeline.records import EPISODE_SCHEMA, EVIDENCE_SCHEMA, FRAME_SCHEMA, STEP_SCHEMA
+    from pipeline.release.manifest import SCENARIO_SCHEMA
+    from pipeline.review.export import ANNOTATION_SCHEMA
+
+    schemas = {"EPISODE_SCHEMA": EPISODE_SCHEMA, "STEP_SCHEMA": STEP_SCHEMA, "FRAME_SCHEMA": FRAME_SCHEMA,
+               "EVIDENCE_SCHEMA": EVIDENCE_SCHEMA, "SCENARIO_SCHEMA": SCENARIO_SCHEMA,
+               "ANNOTATION_SCHEMA": ANNOTATION_SCHEMA, "EVAL_SCHEMA": EVAL_SCHEMA}
+    listed = {m[1]: re.findall(r"`([^`]+)`", m[2])
+              for m in re.finditer(r"^- `(\w+_SCHEMA)` \([^)]*\) columns: (.*)$", DOC.read_text(), re.M)}
+    assert listed == {n: s.names for n, s in schemas.items()}, f"{DOC}: column lists differ from the schemas"
