@@ -90,7 +90,7 @@ def run_physics(env: SimEnv, policy: Policy, unit: EpisodeUnit, cfg: Config,
     """Run and record one episode; write its states and step log. Returns its record
     (without videos) and, if it needs videos, its states (render them, then fill `videos`)."""
     r, v = cfg.stage1.rollout, cfg.stage1.video
-    folder = stage1_dir / unit.rel_dir
+    folder = Stage1Layout(stage1_dir).episode_dir(unit.key)
     if folder.exists():  # leftovers of an attempt killed before its marker
         shutil.rmtree(folder)
     t0 = time.perf_counter()
@@ -147,7 +147,8 @@ def run_one(env: SimEnv, policy: Policy, unit: EpisodeUnit, cfg: Config, stage1_
     record, states = run_physics(env, policy, unit, cfg, stage1_dir)
     if states is None:
         return record
-    videos = render_videos(env, states, stage1_dir / unit.rel_dir, list(v.cameras), v.fps, v.resolution, v.quality)
+    folder = Stage1Layout(stage1_dir).episode_dir(unit.key)
+    videos = render_videos(env, states, folder, list(v.cameras), v.fps, v.resolution, v.quality)
     return with_videos(record, videos, v.fps)
 
 
