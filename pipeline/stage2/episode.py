@@ -28,9 +28,10 @@ from pipeline.atomic import write_json
 from pipeline.config import Stage2Config
 from pipeline.errors import EpisodeError
 from pipeline.evidence import compute_evidence, write_evidence
+from pipeline.layout import Stage2Layout
 from pipeline.records import EpisodeRecord, Localization, QuarantineEntry
 from pipeline.stage2.history import build_history, render_frames, write_history
-from pipeline.stage2.layout import Stage2Paths, load_episode
+from pipeline.stage2.layout import load_episode
 from pipeline.stage2.phases import settled_step, split_phases, step_for_time
 from pipeline.stage2.scenes import write_scene
 from pipeline.stage2.simstate import localize
@@ -47,7 +48,7 @@ class Outcome:
     onset_kind: str = ""
 
 
-def _quarantine(paths: Stage2Paths, rec: EpisodeRecord, entry: QuarantineEntry) -> Outcome:
+def _quarantine(paths: Stage2Layout, rec: EpisodeRecord, entry: QuarantineEntry) -> Outcome:
     paths.abs(paths.localization(rec)).unlink(missing_ok=True)
     write_json(paths.abs(paths.quarantine(rec)), entry.model_dump(mode="json"))
     return Outcome(key=rec.key, status="quarantine", reason=entry.reason, source=entry.source)
@@ -63,7 +64,7 @@ def run_relative(file: str | None, run: Path) -> str | None:
         return file
 
 
-def process_episode(env, rec: EpisodeRecord, stage1: Path, paths: Stage2Paths, cfg: Stage2Config,
+def process_episode(env, rec: EpisodeRecord, stage1: Path, paths: Stage2Layout, cfg: Stage2Config,
                     vlm: dict | None = None) -> Outcome:
     """`vlm`: None for simstate, else {"source", "model", "prompt_name", "prompt_hash", "raw_text",
     and either "fail_time_s" or "reason" (+ "detail")} as stored by the VLM step."""

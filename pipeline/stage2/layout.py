@@ -1,5 +1,5 @@
 """How stage 2 reads stage 1's episodes: `load_episode` checks every input it reads, and
-`fingerprint` stats them. The paths come from pipeline/layout.py (`Stage2Paths` is its
+`fingerprint` stats them. The paths come from pipeline/layout.py (`Stage1Layout`,
 `Stage2Layout`); the folder layout is documented in docs/data-format.md."""
 
 from __future__ import annotations
@@ -13,13 +13,9 @@ import pyarrow.parquet as pq
 
 from pipeline.atomic import file_stamp
 from pipeline.errors import EpisodeError
-from pipeline.layout import Stage1Layout, Stage2Layout
+from pipeline.layout import Stage1Layout
 from pipeline.layout import unit_id as layout_unit_id
 from pipeline.records import EpisodeRecord
-
-
-# the stage-2 paths live in pipeline/layout.py; this name stays for the stage-2 modules
-Stage2Paths = Stage2Layout
 
 
 def unit_id(rec: EpisodeRecord) -> str:

@@ -16,13 +16,13 @@ import shutil
 
 from pipeline.atomic import Completions, write_json
 from pipeline.config import Config
-from pipeline.layout import RunLayout
+from pipeline.layout import RunLayout, Stage2Layout
 from pipeline.errors import FatalError
 from pipeline.records import EpisodeRecord, ManifestProblem, QuarantineEntry, read_episode_rows
-from pipeline.stage2.layout import Stage2Paths, fingerprint, unit_id
+from pipeline.stage2.layout import fingerprint, unit_id
 
 
-def pending_failures(cfg: Config, paths: Stage2Paths) -> tuple[list[EpisodeRecord], int, int]:
+def pending_failures(cfg: Config, paths: Stage2Layout) -> tuple[list[EpisodeRecord], int, int]:
     """(failed episodes not yet done, failed total, successes skipped). A failed episode is
     done when its marker exists and names the inputs it has now (layout.fingerprint); markers
     written before fingerprints existed count as done. Manifest rows that make no record are
@@ -51,7 +51,7 @@ def pending_failures(cfg: Config, paths: Stage2Paths) -> tuple[list[EpisodeRecor
     return todo, len(failed) + sum(p.success is not True for p in problems), n_success
 
 
-def _set_aside_manifest_rows(paths: Stage2Paths, problems: list[ManifestProblem], manifest: str) -> None:
+def _set_aside_manifest_rows(paths: Stage2Layout, problems: list[ManifestProblem], manifest: str) -> None:
     """One quarantine entry per bad manifest row (a row whose success cell says True is no
     failure and is skipped like the other successes); entries of rows fixed since go away.
     `manifest` is the manifest's path relative to the run, as the entries name it."""
@@ -76,7 +76,7 @@ def _set_aside_manifest_rows(paths: Stage2Paths, problems: list[ManifestProblem]
             write_json(target, entry)
 
 
-def _forget(paths: Stage2Paths, rec: EpisodeRecord) -> None:
+def _forget(paths: Stage2Layout, rec: EpisodeRecord) -> None:
     """Drop what an episode's old inputs produced that the redo would not overwrite."""
     paths.abs(paths.vlm(rec)).unlink(missing_ok=True)  # the VLM is asked again about the new video
     shutil.rmtree(paths.scene_dir(rec.key), ignore_errors=True)

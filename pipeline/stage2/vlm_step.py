@@ -17,9 +17,8 @@ from collections.abc import Callable
 
 from pipeline.atomic import write_json
 from pipeline.config import Config
-from pipeline.layout import RunLayout
+from pipeline.layout import RunLayout, Stage2Layout
 from pipeline.records import EpisodeRecord
-from pipeline.stage2.layout import Stage2Paths
 
 BATCH = 32
 
@@ -46,7 +45,7 @@ def _stored(result, rec: EpisodeRecord, frames) -> dict:
     return {**out, "fail_time_s": float(answer.fail)}
 
 
-def run_vlm(cfg: Config, episodes: list[EpisodeRecord], paths: Stage2Paths,
+def run_vlm(cfg: Config, episodes: list[EpisodeRecord], paths: Stage2Layout,
             on_result: Callable[[], None] | None = None) -> int:
     """Localize every episode without a stored VLM result; return how many were asked."""
     import pyarrow as pa
