@@ -1,8 +1,9 @@
 """The run folder: every path, id and file name of a run, in one place.
 
-Nothing else in `pipeline/` spells a stage folder or a run file name; `tests/test_layout.py`
-checks that with the AST, and docs/data-format.md documents each file (who writes it, its
-record, its done marker). Paths only: no IO here except `mkdir` by the callers.
+Nothing else in `pipeline/` spells a stage folder or a run file name (tests/test_layout.py
+scans the source for it). docs/data-format.md documents every file, one row each with the
+call here that gives its path, who writes it, its record and its done marker; the same test
+evaluates those calls. Paths only: no IO.
 
 Episode identity has one spelling, built by `episode_key` and taken apart by `parse_key`:
     key           <suite>/<task>/<episode_id>           records, review items, manifests
@@ -10,17 +11,8 @@ Episode identity has one spelling, built by `episode_key` and taken apart by `pa
     stage-1 dir   episodes/<suite>/<task>/<episode_id>  relative to stage1/ (`EpisodeRecord.path`)
     scene dir     selected_bddl_scenes_<suite>/<task>/episode_<episode_id>   (`scene_rel`)
     annotation    <suite>/<task>/episode_<episode_id>.json                   (`Stage3Layout.annotation`)
-
-Run folder (`run.output_dir`):
-    stage1/   episodes.parquet, summary.json, episodes/<key>/{states.npy, steps.parquet,
-              frames.parquet, truth.parquet, video_<camera>.mp4}, errors/<unit>.txt, _done/
-    stage2/   evidence/, localizations/, quarantine/, vlm/ (per key), scene trees
-              selected_bddl_scenes_*/, localizations.parquet, agreement.*, summary.json, _done/
-    stage3/   review.sqlite, characterizations/, quarantine/, annotations/, reviewed_scenes/,
-              review_status.json, summary.json, _done/
-    release/  (or `release.output_dir`) scenarios.parquet, README.md, SHA256SUMS, scene trees, _build/
-    eval/     trials/, quarantine/, episodes.parquet, metrics.json, report.md, quarantine.jsonl, _done/
-    bench/localize_<localizer>/report.md
+A scene tree (scene dirs under a root) is the same in stage2/, stage3/reviewed_scenes/ and a
+release; `scene_files(root, key, step)` names one scene's files in any of them.
 """
 
 from __future__ import annotations
