@@ -33,7 +33,7 @@ from pipeline.stage2.history import build_history, render_frames, write_history
 from pipeline.stage2.layout import Stage2Paths, load_episode
 from pipeline.stage2.phases import settled_step, split_phases, step_for_time
 from pipeline.stage2.scenes import scene_stem, write_scene
-from pipeline.stage2.simstate import localize
+from pipeline.labelers.simstate.localizer import localize
 
 
 @dataclass

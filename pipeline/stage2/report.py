@@ -4,7 +4,7 @@ Inputs: the per-episode Localization / QuarantineEntry JSON files under the stag
 Outputs (rewritten from those files on every run, so they always match them):
     localizations.parquet            one row per Localization (phases flattened, events as JSON)
     agreement.json + agreement.png   when a VLM ran beside simstate: MAE and shares within
-                                     +-0.5 s / +-1 s of |vlm - simstate| (pipeline.vlm.agreement),
+                                     +-0.5 s / +-1 s of |vlm - simstate| (pipeline.labelers.vlm.agreement),
                                      and a histogram of the signed differences
     summary.json                     counts: scenes, quarantined by reason, by onset event kind;
                                      set_aside + input_faults: episodes quarantined for a bad
@@ -46,7 +46,7 @@ def write_agreement(stage2: Path, locs: list[Localization]) -> dict | None:
     vlm = [loc for loc in locs if loc.source != "simstate"]
     if not vlm:
         return None
-    from pipeline.vlm.agreement import agreement
+    from pipeline.labelers.vlm.agreement import agreement
 
     pairs = [(loc.fail_time_s, loc.simstate_time_s) for loc in vlm if loc.simstate_time_s is not None]
     result = agreement(pairs).model_dump()

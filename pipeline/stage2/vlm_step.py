@@ -1,4 +1,4 @@
-"""The one place stage 2 calls a VLM (`openai` / `transformers` backends of pipeline.vlm).
+"""The one place stage 2 calls a VLM (`openai` / `transformers` backends of pipeline.labelers.vlm).
 
 Input: the failed episodes still to do and the run config. For each episode the backend
 is asked when the failure began (agentview video + instruction + stage 1's frame table, so
@@ -33,8 +33,8 @@ def _duration(result, rec: EpisodeRecord, frames) -> float:
 
 
 def _stored(result, rec: EpisodeRecord, frames) -> dict:
-    from pipeline.vlm.parse import parse_localization
-    from pipeline.vlm.schemas import Quarantine
+    from pipeline.labelers.vlm.parse import parse_localization
+    from pipeline.labelers.vlm.schemas import Quarantine
 
     out = {"source": result.backend, "model": result.model, "prompt_name": result.prompt_name,
            "prompt_hash": result.prompt_hash, "raw_text": result.raw_text, "latency_s": result.latency_s}
@@ -52,7 +52,7 @@ def run_vlm(cfg: Config, episodes: list[EpisodeRecord], paths: Stage2Paths,
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    from pipeline.vlm.backends import VLMRequest, make_backend
+    from pipeline.labelers.vlm.backends import VLMRequest, make_backend
 
     stage1 = cfg.out / "stage1"
     todo = [r for r in episodes if not paths.abs(paths.vlm(r)).exists()]

@@ -1,9 +1,9 @@
 """Characterizers behind one call: localizations in, Characterization or QuarantineEntry out.
 
-- simstate (default): rules over the stage-2 evidence (`pipeline.characterize.simstate`).
+- simstate (default): rules over the stage-2 evidence (`pipeline.labelers.simstate.characterizer`).
 - openai | transformers: the stage-2 VLM backends with the categorization prompt
-  (`pipeline.vlm.backends.make_backend(cfg.stage3.vlm)`), answers parsed by the same
-  loss-free parser (`pipeline.vlm.parse.parse_characterization`).
+  (`pipeline.labelers.vlm.backends.make_backend(cfg.stage3.vlm)`), answers parsed by the same
+  loss-free parser (`pipeline.labelers.vlm.parse.parse_characterization`).
 Invariants: one result per input, in input order; a failure of one episode (unparseable
 answer, backend error, missing evidence) is a QuarantineEntry with stage "stage3" and the
 raw text, never an exception; a misconfiguration (no model, bad prompt) raises before work.
@@ -31,7 +31,7 @@ class SimstateCharacterizer:
     name = "simstate"
 
     def __init__(self, cfg: Config):
-        from pipeline.characterize import simstate
+        from pipeline.labelers.simstate import characterizer as simstate
         from pipeline.evidence import read_evidence
 
         self._characterize, self._read = simstate.characterize, read_evidence
@@ -56,7 +56,7 @@ class SimstateCharacterizer:
 
 class VLMCharacterizer:
     def __init__(self, cfg: Config):
-        from pipeline.vlm.backends import make_backend
+        from pipeline.labelers.vlm.backends import make_backend
 
         self.backend = make_backend(cfg.stage3.vlm)
         self.name = cfg.stage3.vlm.backend
@@ -65,9 +65,9 @@ class VLMCharacterizer:
     def __call__(self, locs: list[Localization], progress: Callable[[], None] | None = None) -> list[Outcome]:
         import pyarrow.parquet as pq
 
-        from pipeline.vlm.backends import VLMRequest
-        from pipeline.vlm.parse import parse_characterization
-        from pipeline.vlm.schemas import Quarantine
+        from pipeline.labelers.vlm.backends import VLMRequest
+        from pipeline.labelers.vlm.parse import parse_characterization
+        from pipeline.labelers.vlm.schemas import Quarantine
 
         requests, order = [], []
         out: list[Outcome | None] = [None] * len(locs)

@@ -84,7 +84,7 @@ def _rel(run_dir: Path, path: Path) -> str:
 def _lengths(run_dir: Path) -> dict[str, float]:
     """Latest valid onset time by key, from the stage-1 manifest (rows that read): the last
     state's time plus one video frame, since a VLM sees a video of total_frames / fps seconds
-    (pipeline.vlm.video_input) and may answer up to its end."""
+    (pipeline.labelers.vlm.video_input) and may answer up to its end."""
     manifest = run_dir / "stage1" / "episodes.parquet"
     if not manifest.is_file():
         return {}

@@ -8,8 +8,8 @@ stage2/); for `openai` / `transformers` the episode's agentview video and frame 
 Failed episodes without a usable truth are set aside with their reason and counted.
 
 Localizers:
-- simstate: `pipeline.stage2.simstate.localize` for the onset, then
-  `pipeline.characterize.simstate.characterize` for level and category (the same calls
+- simstate: `pipeline.labelers.simstate.localizer.localize` for the onset, then
+  `pipeline.labelers.simstate.characterizer.characterize` for level and category (the same calls
   stages 2 and 3 make, with the current rules and thresholds).
 - openai | transformers: the VLM backend of `stage2.vlm` (backend replaced by the chosen
   one) asked to localize, then to characterize at its own onset; answers go through the
@@ -69,12 +69,12 @@ def load_truths(run_dir: Path) -> tuple[list[EpisodeRecord], dict[str, EpisodeTr
 
 # ---- localizers --------------------------------------------------------------------------
 def predict_simstate(cfg: Config, records: list[EpisodeRecord]) -> dict[str, Prediction]:
-    from pipeline.characterize.simstate import characterize
+    from pipeline.labelers.simstate.characterizer import characterize
     from pipeline.evidence import compute_evidence, read_evidence
     from pipeline.records import Localization
     from pipeline.stage2.layout import Stage2Paths, load_episode
     from pipeline.stage2.phases import split_phases
-    from pipeline.stage2.simstate import localize
+    from pipeline.labelers.simstate.localizer import localize
 
     run_dir, paths = Path(cfg.out), Stage2Paths(Path(cfg.out) / "stage2")
     out: dict[str, Prediction] = {}
@@ -120,9 +120,9 @@ def predict_vlm(cfg: Config, backend_name: str, records: list[EpisodeRecord]) ->
 
     from pipeline.stage2.phases import step_for_time
     from pipeline.stage2.vlm_step import _stored
-    from pipeline.vlm.backends import VLMRequest, make_backend
-    from pipeline.vlm.parse import parse_characterization
-    from pipeline.vlm.schemas import Quarantine
+    from pipeline.labelers.vlm.backends import VLMRequest, make_backend
+    from pipeline.labelers.vlm.parse import parse_characterization
+    from pipeline.labelers.vlm.schemas import Quarantine
 
     stage1 = Path(cfg.out) / "stage1"
     out: dict[str, Prediction] = {}
