@@ -21,12 +21,20 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from pipeline.atomic import write_json, write_with
+from pipeline.errors import invalid_file
 from pipeline.records import Localization, QuarantineEntry
 
 
+def _read(model, path: Path):
+    try:
+        return model.model_validate_json(path.read_text())
+    except (ValueError, OSError) as e:  # ValidationError is a ValueError; a bad file is named, not a traceback
+        raise invalid_file(path, e) from e
+
+
 def load_outputs(stage2: Path) -> tuple[list[Localization], list[QuarantineEntry]]:
-    locs = [Localization.model_validate_json(p.read_text()) for p in sorted((stage2 / "localizations").rglob("*.json"))]
-    quar = [QuarantineEntry.model_validate_json(p.read_text()) for p in sorted((stage2 / "quarantine").rglob("*.json"))]
+    locs = [_read(Localization, p) for p in sorted((stage2 / "localizations").rglob("*.json"))]
+    quar = [_read(QuarantineEntry, p) for p in sorted((stage2 / "quarantine").rglob("*.json"))]
     return locs, quar
 
 

@@ -36,7 +36,7 @@ from pipeline.review.db import write_session
 from pipeline.review.enqueue import enqueue
 from pipeline.review.server import engine_for
 from pipeline.stage3.characterizers import make_characterizer
-from pipeline.stage3.inputs import INPUT_FAULTS, Unit, collect, context, fingerprint
+from pipeline.stage3.inputs import INPUT_FAULTS, UNREADABLE, Unit, collect, context, fingerprint, warn_unreadable
 
 BATCH = 16
 
@@ -168,7 +168,8 @@ def _instruction(run_dir: Path, unit: Unit) -> str:
         suite, task, ep = unit.key.split("/", 2)
         try:
             rows = pq.read_table(manifest, columns=["suite", "task", "episode_id", "instruction"]).to_pylist()
-        except Exception:  # an unreadable manifest is stage 2's to report; the key still names the task
+        except UNREADABLE as e:  # an unreadable manifest is stage 2's to report; the key still names the task
+            warn_unreadable(manifest, e, "the instruction is made from the task name")
             rows = []
         for row in rows:
             if (row["suite"], row["task"], row["episode_id"]) == (suite, task, ep) and row["instruction"]:
