@@ -1,28 +1,26 @@
 """Qwen VLM access for stages 2 and 3: prompts, video input, backends, loss-free parsing.
 
-How a stage runner uses it (the `simstate` localizer lives in pipeline/stage2, not here):
+How a stage uses it (through the labeler protocols of `pipeline.labelers.base`):
 
-    from pipeline.labelers.vlm.backends import VLMRequest, make_backend
-    from pipeline.labelers.vlm.parse import parse_localization, parse_characterization
-    from pipeline.labelers.vlm.schemas import Quarantine
-    from pipeline.labelers.vlm.outcome import provenance, quarantine_entry
+    from pipeline.labelers.base import Episode
+    from pipeline.labelers.registry import make_characterizer, make_localizer
 
-    backend = make_backend(cfg.stage2.vlm)              # openai | transformers; ConfigError otherwise
-    results = backend.run([VLMRequest(task="localize", video=mp4, instruction=ep.instruction,
-                                      frames_table=frames, key=ep.key) for ...], progress=bar_update)
-    for r in results:                                    # same order as the requests
-        answer = parse_localization(r, r.video.duration_s if r.video else duration_s)
-        if isinstance(answer, Quarantine):
-            entry = quarantine_entry(r.extra["key"], "stage2", r, answer)   # -> QuarantineEntry
+    localizer = make_localizer(cfg.stage2.vlm)          # openai | transformers (| simstate)
+    onsets = localizer.localize([Episode(rec, folder, video, frames) for ...], progress=tick)
+    for onset in onsets:                                 # same order as the episodes
+        if onset.found:
+            t = onset.fail_time_s                        # seconds from video start, one decimal
+            # step = step_for_time(t, frames, rec.steps) -> stage 1's frames table
         else:
-            t = answer.fail                              # seconds from video start, one decimal
-            # frame = round(t * r.video.source_fps) -> step through stage 1's frames table
-            fields = provenance(r)                       # source, model, prompt_name, prompt_hash, raw_text
+            onset.reason, onset.detail                   # no_video, backend_error, truncated, no_json, ...
+        onset.trace()                                    # model, prompt_name, prompt_hash, raw_text
+    localizer.close()
 
-Stage 3 is the same with `task="characterize"`, `fail_time_s=...` and `parse_characterization`.
+Stage 3 is the same with `make_characterizer(cfg.stage3.vlm, run_dir).characterize(localizations)`.
 `pipeline.labelers.vlm.agreement.agreement(pairs)` compares VLM and simstate onsets.
 
-Modules: prompts (versioned files + hash), video_input (PyAV sampling with true fps/indices),
-backends/ (base Protocol + VLMResult, openai_backend, transformers_backend), parse, schemas,
-outcome (record fields), agreement, torch_compat (torchvision on CPU torch).
+Modules: labeler (VLMLocalizer, VLMCharacterizer), prompts (versioned files + hash),
+video_input (PyAV sampling with true fps/indices), backends/ (base Protocol + VLMResult,
+openai_backend, transformers_backend), parse, schemas, agreement, torch_compat (torchvision
+on CPU torch).
 """

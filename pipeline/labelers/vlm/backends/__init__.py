@@ -1,8 +1,8 @@
 """VLM backends behind one Protocol (`base.VLMBackend`), chosen by `VLMConfig.backend`.
 
 `make_backend(vlm_cfg)` builds `openai` or `transformers` with both prompts loaded (so a
-missing prompt file fails before any work). `simstate` needs no model and is dispatched by
-the stage runners themselves (pipeline/stage2); asking this factory for it is a ConfigError.
+missing prompt file fails before any work). `simstate` needs no model and is built by
+`pipeline.labelers.registry`; asking this factory for it is a ConfigError.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ def make_backend(cfg: VLMConfig, **kwargs) -> VLMBackend:
     if cfg.backend not in ("openai", "transformers"):
         raise ConfigError(
             f"vlm.backend: {cfg.backend!r} is not a model backend (openai | transformers); "
-            "the stage runner handles 'simstate' itself"
+            "'simstate' is built by pipeline.labelers.registry"
         )
     prompts = load_prompts(cfg.language, cfg.prompt_version, cfg.prompts_dir)
     if cfg.backend == "openai":
