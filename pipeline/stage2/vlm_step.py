@@ -1,9 +1,10 @@
-"""The one place stage 2 calls a VLM (`openai` / `transformers` backends of pipeline.labelers.vlm).
+"""The one place stage 2 calls a VLM: the `openai` / `transformers` localizer of
+`pipeline.labelers` (built by `registry.make_localizer`, used through the Localizer protocol).
 
 Input: the failed episodes still to do and the run config. For each episode the backend
 is asked when the failure began (agentview video + instruction + stage 1's frame table, so
 times are true times); the answer goes through the loss-free parser. Output, per episode,
-`stage2/vlm/<suite>/<task>/<episode_id>.json`:
+an `Onset` (pipeline.labelers.base) stored as `stage2/vlm/<suite>/<task>/<episode_id>.json`:
     {"source", "model", "prompt_name", "prompt_hash", "raw_text", "latency_s",
      "fail_time_s"}                      -- a usable answer, or
     {..., "reason", "detail"}           -- the parser's / backend's quarantine reason.
