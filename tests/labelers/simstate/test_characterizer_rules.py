@@ -1,6 +1,7 @@
 """The simstate characterizer's rules on small synthetic evidence (no simulator): the branches
 real rollouts do not reach (L2, placement, obstruction by a nearby or touching object, fixture
-obstruction, toppled targets, fixture goals)."""
+obstruction, toppled targets, fixture goals). Levels, categories and the obstacle are exact;
+of the action text only what the rules decide (which objects it names) is checked."""
 
 from __future__ import annotations
 
@@ -43,16 +44,15 @@ def test_a_target_nudged_a_few_centimetres_is_l2_with_an_adjusted_approach():
     _place(ev, "bowl_1", (0.03, 0.0, 0.0))  # moved 3 cm: more than MOVED_M, less than FAR_M
     c = characterize(_loc(_event("unintended_displacement")), ev)
     assert (c.recovery_level, c.failure_category) == (Level.L2, Category.object_displacement)
-    assert c.recovery_action == "Adjust the approach to the bowl and place it on the plate"
+    assert "bowl" in c.recovery_action and "plate" in c.recovery_action
     assert json.loads(c.raw_text)["changes"]["bowl_1"]["moved"] == 0.03
 
 
-def test_a_tilt_gain_alone_is_l2_and_a_grasp_failure_at_l2_still_means_regrasp():
+def test_a_tilt_gain_alone_is_l2():
     ev = _evidence()
     ev.per_object["tilt_deg"]["bowl_1"][ONSET + 1:] = 15.0  # tilted past TILT_DEG, far from a topple
     c = characterize(_loc(_event("grasp_lost")), ev)
     assert (c.recovery_level, c.failure_category) == (Level.L2, Category.grasp_failure)
-    assert c.recovery_action == "Re-grasp the bowl and place it on the plate"
 
 
 def test_nothing_changed_is_l1():
@@ -74,16 +74,18 @@ def test_a_knocked_object_ending_next_to_the_target_is_an_l4_obstruction_named_i
     _place(ev, "cup_1", (0.1, 0.0, 0.0))  # from 0.5 m away to 10 cm beside the bowl
     c = characterize(_loc(_event("object_collision", "cup_1")), ev)
     assert (c.recovery_level, c.failure_category) == (Level.L4, Category.collision_or_interaction_failure)
-    assert c.recovery_action == "Move the cup out of the way, then grasp the bowl and place it on the plate"
     assert json.loads(c.raw_text)["obstacle"] == "cup_1"
+    assert c.recovery_action.index("cup") < c.recovery_action.index("bowl")  # clear the way first
 
 
 def test_a_knocked_object_touching_the_target_obstructs_even_when_its_origin_is_far():
     ev = _evidence()
     _place(ev, "cup_1", (0.3, 0.0, 0.0))  # moved 20 cm, still 30 cm from the bowl's origin
     assert characterize(_loc(), ev).recovery_level is Level.L2  # far and not touching: no obstruction
-    ev.contacts[END - 1] = ["bowl_1|cup_1"]
-    assert characterize(_loc(), ev).recovery_level is Level.L4
+    for t in range(ONSET + 1, N):
+        ev.contacts[t] = ["bowl_1|cup_1"]
+    c = characterize(_loc(), ev)
+    assert c.recovery_level is Level.L4 and json.loads(c.raw_text)["obstacle"] == "cup_1"
 
 
 def test_a_non_target_that_did_not_move_obstructs_nothing_however_close():
@@ -105,7 +107,7 @@ def test_a_toppled_target_is_l3_and_is_set_upright_first():
     ev.per_object["tilt_deg"]["bowl_1"][ONSET + 1:] = 80.0
     c = characterize(_loc(_event("object_toppled")), ev)
     assert (c.recovery_level, c.failure_category) == (Level.L3, Category.object_displacement)
-    assert c.recovery_action == "Set the bowl upright, then grasp it and place it on the plate"
+    assert c.recovery_action.startswith("Set the bowl upright")
 
 
 def test_a_toppled_non_target_is_a_collision_and_not_a_displacement_of_the_target():
@@ -119,15 +121,19 @@ def test_a_fixture_goal_has_no_target_and_its_action_repeats_the_operation():
     ev.goal, ev.targets, ev.references = [["open", "wooden_cabinet_1_top_region"]], [], ["wooden_cabinet_1"]
     c = characterize(_loc(_event("goal_regression", None)), ev)
     assert (c.recovery_level, c.failure_category) == (Level.L1, Category.object_displacement)
-    assert c.recovery_action == "Open the wooden cabinet again"
-    ev.goal = [["turnon", "flat_stove_1"], ["close", "wooden_cabinet_1_top_region"]]
-    assert characterize(_loc(), ev).recovery_action == "Turn on the flat stove and close the wooden cabinet again"
+    assert c.recovery_action.startswith("Open the") and "cabinet" in c.recovery_action
+    assert "bowl" not in c.recovery_action  # no object to grasp: the goal's objects are not targets
+    ev.goal = [["turnon", "flat_stove_1"]]
+    action = characterize(_loc(), ev).recovery_action
+    assert action.startswith("Turn on the") and "stove" in action
 
 
-def test_a_goal_on_a_fixture_region_names_the_region_and_a_container_goal_says_put_in():
+def test_a_goal_on_a_fixture_region_names_the_region_and_a_container_goal_its_container():
     ev = _evidence(goal=(("on", "bowl_1", "wooden_cabinet_1_top_region"),), fixtures=("wooden_cabinet_1",))
     ev.references = ["wooden_cabinet_1"]
-    assert characterize(_loc(), ev).recovery_action == "Re-grasp the bowl and place it on the top of the wooden cabinet"
+    action = characterize(_loc(), ev).recovery_action
+    assert all(w in action for w in ("bowl", "top", "cabinet"))
     ev.goal = [["in", "bowl_1", "basket_1_contain_region"]]
     ev.fixtures = ["basket_1"]
-    assert characterize(_loc(), ev).recovery_action == "Re-grasp the bowl and put it in the basket"
+    action = characterize(_loc(), ev).recovery_action
+    assert "in the basket" in action and "contain" not in action
