@@ -12,8 +12,8 @@ from sqlalchemy import select
 from pipeline.config import load_config
 from pipeline.review.db import Item, make_engine, read_session
 from pipeline.stage3.run import run as run_stage3
+from tests.labelers.vlm.loopback_server import LoopbackServer
 from tests.review.sample_run import SUITE, TASK, build
-from tests.vlm.loopback_server import LoopbackServer
 
 ANSWER = json.dumps({"recovery_level": "l2", "failure_category": "Grasp Failure",
                      "recovery_action": "Grasp the black bowl again"})
