@@ -21,28 +21,12 @@ Run folder (`run.output_dir`):
 
 from __future__ import annotations
 
-from enum import Enum
-
 import pyarrow as pa
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from pipeline import SCHEMA_VERSION
-
-
-class Level(str, Enum):
-    L1 = "L1"  # action retry
-    L2 = "L2"  # action adaptation
-    L3 = "L3"  # object state recovery
-    L4 = "L4"  # environmental recovery
-
-
-class Category(str, Enum):
-    grasp_failure = "grasp_failure"
-    placement_failure = "placement_failure"
-    object_displacement = "object_displacement"
-    collision_or_interaction_failure = "collision_or_interaction_failure"
-    environmental_obstruction = "environmental_obstruction"
-    other = "other"
+# the vocabularies live in pipeline.vocab; importing them from here keeps working
+from pipeline.vocab import Category, Decision, EventKind, Level, QuarantineReason, Resolution  # noqa: F401
 
 
 class Record(BaseModel):
@@ -231,8 +215,7 @@ class SimEvent(Record):
 
     step: int
     time_s: float
-    kind: str  # grasp_missed | grasp_lost | object_dropped | object_toppled | unintended_displacement
-    #            | robot_contact_non_target | object_collision | goal_regression | ...
+    kind: EventKind
     object: str | None = None
     other: str | None = None
     detail: str = ""
@@ -288,7 +271,7 @@ class QuarantineEntry(Record):
     key: str
     stage: str  # stage2 | stage3
     source: str
-    reason: str  # no_json | schema | out_of_range | truncated | backend_error | ...
+    reason: QuarantineReason
     detail: str = ""
     # a bad input: the file (run-relative when it lies in the run folder) and the field at fault
     file: str | None = None
@@ -355,7 +338,7 @@ class AnnotationProposal(Record):
 
 class AnnotationReview(Record):
     reviewer: str
-    decision: str  # accept | revise | flag
+    decision: Decision
     fail_time_s: float | None = None
     fail_step: int | None = None
     recovery_level: Level | None = None
@@ -387,7 +370,7 @@ class Annotation(Record):
     recovery_level: Level
     failure_category: Category
     recovery_action: str = Field(min_length=1, max_length=200)
-    resolution: str  # agreed | adjudicated
+    resolution: Resolution  # agreed | adjudicated (excluded items are never exported)
     quarantined: bool = False  # the model's output was quarantined; people supplied the values
     quarantine_reason: str | None = None
     model_proposal: AnnotationProposal

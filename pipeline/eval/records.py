@@ -23,6 +23,7 @@ from pydantic import Field
 from pipeline import SCHEMA_VERSION
 from pipeline.atomic import write_with
 from pipeline.records import Record
+from pipeline.vocab import Category, Level
 
 
 class GripperCondition(str, Enum):
@@ -48,8 +49,8 @@ class EvalEpisode(Record):
     instruction: str
     episode_id: str  # the failed source episode
     scene_step: int  # failure onset step of the source episode
-    level: str | None = None  # L1..L4 from the release manifest; None when unlabeled
-    category: str | None = None
+    level: Level | None = None  # from the release manifest; None when unlabeled
+    category: Category | None = None
     policy: str
     policy_kind: str
     gripper: GripperCondition

@@ -17,6 +17,7 @@ from pydantic import BaseModel, ConfigDict
 
 from pipeline import SCHEMA_VERSION
 from pipeline.atomic import write_with
+from pipeline.vocab import Category, Level
 
 MANIFEST_NAME = "scenarios.parquet"
 
@@ -32,8 +33,8 @@ class ScenarioRow(BaseModel):
     step: int  # simulator step of the saved scene (`step_<NNNN>`)
     fail_time_s: float
     fail_step: int
-    level: str
-    category: str
+    level: Level
+    category: Category
     recovery_action: str
     policy: str  # the failure-generator policy
     policy_kind: str

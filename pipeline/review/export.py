@@ -24,6 +24,7 @@ from pipeline.atomic import write_json, write_text, write_with
 from pipeline.records import Annotation, AnnotationAdjudication, AnnotationProposal, AnnotationReview
 from pipeline.review.audit import iso
 from pipeline.review.db import FINAL, Adjudication, Item, Review, User
+from pipeline.vocab import Resolution
 
 ANNOTATION_SCHEMA = pa.schema(
     [
@@ -80,7 +81,7 @@ def final_items(s: Session) -> list[Item]:
     newest: dict[str, Item] = {}
     for item in s.scalars(select(Item).where(Item.status == FINAL).order_by(Item.key, Item.revision)):
         newest[item.key] = item
-    return [i for i in newest.values() if i.resolution != "excluded" and i.final]
+    return [i for i in newest.values() if i.resolution != Resolution.excluded and i.final]
 
 
 def export(s: Session, root: str | Path) -> list[Path]:

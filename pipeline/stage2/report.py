@@ -21,7 +21,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from pipeline.atomic import write_json, write_with
-from pipeline.records import Localization, QuarantineEntry
+from pipeline.records import Localization, QuarantineEntry, QuarantineReason
 
 
 def load_outputs(stage2: Path) -> tuple[list[Localization], list[QuarantineEntry]]:
@@ -83,7 +83,7 @@ def write_reports(stage2: Path) -> dict:
         "quarantine_reasons": dict(Counter(q.reason for q in quar)),
         # set aside for a bad input (a stage-1 file or manifest cell) or an unexpected error:
         # the episodes a fix and a rerun can still bring back
-        "set_aside": len(faults := [q for q in quar if q.file or q.reason == "episode_error"]),
+        "set_aside": len(faults := [q for q in quar if q.file or q.reason == QuarantineReason.episode_error]),
         "input_faults": [{"key": q.key, "reason": q.reason, "file": q.file, "field": q.field} for q in faults],
         "onset_kinds": dict(Counter(r for r in table.column("onset_kind").to_pylist()) if locs else {}),
         "agreement": write_agreement(stage2, locs),

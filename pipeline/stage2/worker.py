@@ -18,7 +18,7 @@ from pathlib import Path
 from pipeline.atomic import Completions, write_json
 from pipeline.config import Stage2Config
 from pipeline.errors import FatalError
-from pipeline.records import EpisodeRecord, QuarantineEntry
+from pipeline.records import EpisodeRecord, QuarantineEntry, QuarantineReason
 
 _CACHE = None  # per worker process: the last task's environment
 
@@ -45,7 +45,7 @@ def _set_aside(paths, rec: EpisodeRecord, e: Exception):
     from pipeline.stage2.episode import Outcome
 
     paths.abs(paths.localization(rec)).unlink(missing_ok=True)
-    entry = QuarantineEntry(key=rec.key, stage="stage2", source="stage2", reason="episode_error",
+    entry = QuarantineEntry(key=rec.key, stage="stage2", source="stage2", reason=QuarantineReason.episode_error,
                             detail=f"{type(e).__name__}: {e}"[:2000])
     write_json(paths.abs(paths.quarantine(rec)), entry.model_dump(mode="json"))
     return Outcome(key=rec.key, status="quarantine", reason=entry.reason)
@@ -66,7 +66,7 @@ def process_task(unit: TaskUnit, emit) -> list[dict]:
         vlm_file = paths.abs(paths.vlm(rec))
         vlm = json.loads(vlm_file.read_text()) if cfg.vlm.backend != "simstate" and vlm_file.exists() else None
         if cfg.vlm.backend != "simstate" and vlm is None:
-            vlm = {"source": cfg.vlm.backend, "reason": "backend_error", "detail": "no stored VLM result"}
+            vlm = {"source": cfg.vlm.backend, "reason": QuarantineReason.backend_error, "detail": "no stored VLM result"}
         inputs = fingerprint(run / "stage1", rec)  # before reading: a file changed meanwhile is redone
         try:
             out = process_episode(env, rec, run / "stage1", paths, cfg, vlm)

@@ -16,7 +16,7 @@ from pathlib import Path
 
 from pipeline.config import Config
 from pipeline.errors import EpisodeError
-from pipeline.records import Characterization, Localization, QuarantineEntry
+from pipeline.records import Characterization, Localization, QuarantineEntry, QuarantineReason
 
 Outcome = Characterization | QuarantineEntry
 
@@ -43,12 +43,12 @@ class SimstateCharacterizer:
             path = self.run_dir / "stage2" / "evidence" / loc.suite / loc.task / f"{loc.episode_id}.parquet"
             try:
                 if not path.is_file():
-                    raise EpisodeError("missing_evidence", f"{path}: no such file")
+                    raise EpisodeError(QuarantineReason.missing_evidence, f"{path}: no such file")
                 out.append(self._characterize(loc, self._read(path)))
             except EpisodeError as e:
                 out.append(_quarantine(loc, "simstate", e.reason, e.detail))
             except (ValueError, OSError, KeyError, IndexError) as e:  # a malformed evidence file
-                out.append(_quarantine(loc, "simstate", "bad_evidence", f"{path}: {type(e).__name__}: {e}"))
+                out.append(_quarantine(loc, "simstate", QuarantineReason.bad_evidence, f"{path}: {type(e).__name__}: {e}"))
             if progress:
                 progress()
         return out
@@ -76,7 +76,7 @@ class VLMCharacterizer:
             ep_dir = self.run_dir / "stage1" / "episodes" / suite / task / ep
             video = ep_dir / "video_agentview.mp4"
             if not video.is_file():
-                out[i] = _quarantine(loc, self.name, "missing_video", f"{video}: no such file")
+                out[i] = _quarantine(loc, self.name, QuarantineReason.missing_video, f"{video}: no such file")
                 continue
             frames = ep_dir / "frames.parquet"
             requests.append(VLMRequest(task="characterize", video=video, instruction=loc.instruction,
@@ -88,7 +88,7 @@ class VLMCharacterizer:
             loc = locs[i]
             ans = parse_characterization(res)
             if isinstance(ans, Quarantine):
-                reason = "backend_error" if res.error else ans.reason.value
+                reason = QuarantineReason.backend_error if res.error else ans.reason.value
                 out[i] = _quarantine(loc, self.name, reason, res.error or ans.detail, res.raw_text or ans.raw_text,
                                      res.model, res.prompt_name, res.prompt_hash)
             else:
