@@ -20,7 +20,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 from pydantic import Field
 
-from pipeline import SCHEMA_VERSION
+from pipeline.arrow import F32, I64, arrow_schema
 from pipeline.atomic import write_with
 from pipeline.records import Record
 from pipeline.vocab import Category, Level
@@ -55,8 +55,8 @@ class EvalEpisode(Record):
     policy_kind: str
     gripper: GripperCondition
     trial: int
-    seed: int  # the run seed; trial randomness derives from (seed, scene_id, trial)
-    policy_seed: int
+    seed: I64  # the run seed; trial randomness derives from (seed, scene_id, trial)
+    policy_seed: I64
     chunk_size: int
     horizon: int
     temporal_context: str = "none"
@@ -70,8 +70,8 @@ class EvalEpisode(Record):
     success: bool
     first_success_step: int | None = None
     wall_time_s: float
-    actions: list[list[float]] = Field(default_factory=list)  # (steps, 7)
-    eef_pos: list[list[float]] = Field(default_factory=list)  # (steps + 1, 3), row 0 = start
+    actions: list[list[F32]] = Field(default_factory=list)  # (steps, 7)
+    eef_pos: list[list[F32]] = Field(default_factory=list)  # (steps + 1, 3), row 0 = start
 
     def unit_id(self) -> str:
         return unit_id(self.policy, self.chunk_size, self.mode.value, self.scene_id, self.gripper.value,
@@ -86,43 +86,7 @@ def unit_id(policy: str, chunk: int, mode: str, scene_id: str, gripper: str, tri
     return re.sub(r"[^A-Za-z0-9._-]+", "_", "__".join(parts).replace("/", "__"))
 
 
-_F32_LIST = pa.list_(pa.float32())
-EVAL_SCHEMA = pa.schema(
-    [
-        pa.field("schema_version", pa.int32(), nullable=False),
-        pa.field("mode", pa.string(), nullable=False),
-        pa.field("scene_id", pa.string(), nullable=False),
-        pa.field("suite", pa.string(), nullable=False),
-        pa.field("task", pa.string(), nullable=False),
-        pa.field("instruction", pa.string(), nullable=False),
-        pa.field("episode_id", pa.string(), nullable=False),
-        pa.field("scene_step", pa.int32(), nullable=False),
-        pa.field("level", pa.string()),
-        pa.field("category", pa.string()),
-        pa.field("policy", pa.string(), nullable=False),
-        pa.field("policy_kind", pa.string(), nullable=False),
-        pa.field("gripper", pa.string(), nullable=False),
-        pa.field("trial", pa.int32(), nullable=False),
-        pa.field("seed", pa.int64(), nullable=False),
-        pa.field("policy_seed", pa.int64(), nullable=False),
-        pa.field("chunk_size", pa.int32(), nullable=False),
-        pa.field("horizon", pa.int32(), nullable=False),
-        pa.field("temporal_context", pa.string(), nullable=False),
-        pa.field("offsets", pa.map_(pa.string(), pa.list_(pa.float64(), 2)), nullable=False),
-        pa.field("gripper_settle_steps", pa.int32(), nullable=False),
-        pa.field("init_eef_drift_m", pa.float64(), nullable=False),
-        pa.field("init_gripper_opening", pa.float64(), nullable=False),
-        pa.field("rd_phase", pa.string()),
-        pa.field("rd_start_step", pa.int32()),
-        pa.field("steps", pa.int32(), nullable=False),
-        pa.field("success", pa.bool_(), nullable=False),
-        pa.field("first_success_step", pa.int32()),
-        pa.field("wall_time_s", pa.float64(), nullable=False),
-        pa.field("actions", pa.list_(_F32_LIST), nullable=False),
-        pa.field("eef_pos", pa.list_(_F32_LIST), nullable=False),
-    ],
-    metadata={"schema_version": str(SCHEMA_VERSION)},
-)
+EVAL_SCHEMA = arrow_schema(EvalEpisode)
 
 
 def to_row(ep: EvalEpisode) -> dict:
