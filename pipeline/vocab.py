@@ -83,6 +83,7 @@ class QuarantineReason(StrEnum):
     missing_evidence = "missing_evidence"
     no_evidence = "no_evidence"
     bad_evidence = "bad_evidence"
+    bad_proposal = "bad_proposal"  # a proposal or review context the queue refused (field named)
     # release (pipeline/release/sources.py, build.py)
     no_localization = "no_localization"
     no_episode = "no_episode"

@@ -13,12 +13,12 @@ the rows. `unit_id` is a flat, file-safe name unique within a run.
 from __future__ import annotations
 
 import re
-from enum import Enum
+from enum import StrEnum
 from pathlib import Path
 
 import pyarrow as pa
 import pyarrow.parquet as pq
-from pydantic import Field
+from pydantic import ConfigDict, Field
 
 from pipeline.arrow import F32, I64, arrow_schema
 from pipeline.atomic import write_with
@@ -26,17 +26,17 @@ from pipeline.records import Record
 from pipeline.vocab import Category, Level
 
 
-class GripperCondition(str, Enum):
+class GripperCondition(StrEnum):
     open = "open"
     closed = "closed"
 
 
-class TrialMode(str, Enum):
+class TrialMode(StrEnum):
     scene = "scene"  # from a recovery scene: the RSR / RC population
     rd = "rd"  # from a state along the original failed rollout: the RD population
 
 
-class RDPhase(str, Enum):
+class RDPhase(StrEnum):
     pre = "pre"  # start state before the failure onset
     post = "post"  # start state at or after the onset
 
@@ -104,14 +104,32 @@ def write_episodes(path: str | Path, episodes: list[EvalEpisode]) -> None:
     write_with(path, lambda p: pq.write_table(table, p))
 
 
-def read_rows(path: str | Path, with_trajectory: bool = False) -> list[dict]:
-    """Rows as plain dicts (what `metrics` takes); trajectories only when asked (large)."""
-    columns = None if with_trajectory else [f.name for f in EVAL_SCHEMA if f.name not in ("actions", "eef_pos")]
-    rows = pq.read_table(path, columns=columns).to_pylist()
-    for r in rows:
-        r["offsets"] = {k: tuple(v) for k, v in (r["offsets"] or [])}
-    return rows
+class MetricRow(Record):
+    """A trial as the metrics and the report read it: the columns of an EvalEpisode they use."""
+
+    model_config = ConfigDict(extra="ignore")  # a row read from the file has every column
+
+    mode: TrialMode = TrialMode.scene
+    scene_id: str
+    suite: str
+    task: str
+    level: Level | None = None
+    category: Category | None = None
+    policy: str
+    chunk_size: int
+    gripper: GripperCondition
+    rd_phase: RDPhase | None = None
+    success: bool
+
+
+def read_rows(path: str | Path) -> list[MetricRow]:
+    """The trials of an episodes file as MetricRows (the trajectories are not read)."""
+    columns = [c for c in MetricRow.model_fields if c in EVAL_SCHEMA.names]
+    return [MetricRow.model_validate(r) for r in pq.read_table(path, columns=columns).to_pylist()]
 
 
 def read_episodes(path: str | Path) -> list[EvalEpisode]:
-    return [EvalEpisode.model_validate(r) for r in read_rows(path, with_trajectory=True)]
+    rows = pq.read_table(path).to_pylist()
+    for r in rows:
+        r["offsets"] = {k: tuple(v) for k, v in (r["offsets"] or [])}
+    return [EvalEpisode.model_validate(r) for r in rows]
