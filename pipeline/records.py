@@ -1,7 +1,9 @@
 """Typed records at every stage boundary, and the run folder layout.
 
 Raw data never changes; labels sit beside it, keyed by the stable episode key
-`<suite>/<task_name>/<episode_id>`. Every artifact carries `schema_version`.
+`<suite>/<task_name>/<episode_id>`. Every artifact carries `schema_version`. Closed sets of
+values are the string enums of `pipeline.vocab`; each Parquet file's schema is derived from
+its row model by `pipeline.arrow.arrow_schema` (never written by hand).
 
 Run folder (`run.output_dir`):
     config.resolved.yaml                 the validated config of the last stage run
