@@ -18,8 +18,9 @@ from pipeline.atomic import write_json, write_text, write_with
 from pipeline.config import SUITES, EvalConfig
 from pipeline.eval import metrics as M
 from pipeline.eval.records import MetricRow
+from pipeline.vocab import Level
 
-LEVELS = ("L1", "L2", "L3", "L4")
+LEVELS = tuple(Level)  # the main table's columns, always
 
 
 def pct(x: float) -> str:
