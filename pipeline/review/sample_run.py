@@ -17,7 +17,8 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from pipeline.atomic import write_json, write_with
-from pipeline.records import EVIDENCE_SCHEMA, FRAME_SCHEMA, EventKind, Localization, Phases, QuarantineEntry, QuarantineReason, SimEvent
+from pipeline.records import (EVIDENCE_SCHEMA, FRAME_SCHEMA, EventKind, Localization, Phases, QuarantineEntry,
+                              QuarantineReason, SimEvent)
 
 SUITE, TASK = "libero_spatial", "pick_up_the_black_bowl_and_place_it_on_the_plate"
 INSTRUCTION = "pick up the black bowl and place it on the plate"

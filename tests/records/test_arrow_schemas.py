@@ -60,7 +60,8 @@ def test_mapping_covers_optional_fixed_lists_maps_enums_and_structs():
     assert s == pa.schema([
         pa.field("n", pa.int32(), nullable=False), pa.field("big", pa.int64(), nullable=False),
         pa.field("x", pa.float64()), pa.field("f", pa.float32(), nullable=False),
-        pa.field("v", pa.list_(pa.float32(), 3), nullable=False), pa.field("pair", pa.list_(pa.float64(), 2), nullable=False),
+        pa.field("v", pa.list_(pa.float32(), 3), nullable=False),
+        pa.field("pair", pa.list_(pa.float64(), 2), nullable=False),
         pa.field("m", pa.map_(pa.string(), pa.list_(pa.string())), nullable=False), pa.field("level", pa.string()),
         pa.field("inner", pa.struct([pa.field("a", pa.int32())]), nullable=False),
         pa.field("as_json", pa.string(), nullable=False),
