@@ -20,14 +20,23 @@ from collections.abc import Callable
 from typing import Any
 
 from pipeline.errors import FatalError
-from pipeline.executors.base import Executor, Retry, RunReport, SetAside, WorkFn, default_label
+from pipeline.executors.base import Executor, Retry, RunReport, SetAside, WorkFn, default_label, retry_event
+
+# The WorkerContext of this Ray worker process: Ray reuses a worker process for the tasks of
+# one job, so like a local worker it keeps its environment and policies across items.
+_CONTEXT = None
 
 
 def _ray_call(fn: WorkFn, item: Any, events, env: dict[str, str] | None) -> Any:
+    global _CONTEXT
     from pipeline.executors.base import apply_worker_env
+    from pipeline.runner.context import WorkerContext
 
     apply_worker_env(env)
-    return fn(item, lambda ev: events.put(ev))
+    if _CONTEXT is None:
+        _CONTEXT = WorkerContext()
+    _CONTEXT.emit = lambda ev: events.put(ev)  # this run's queue
+    return fn(item, _CONTEXT)
 
 
 def _lost_worker_errors(ray) -> tuple[type, ...]:
@@ -105,6 +114,8 @@ class RayExecutor(Executor):
                         if attempts[i] <= self.max_retries:
                             report.retried.append(Retry(item=i, label=label(i, items[i]), attempt=attempts[i],
                                                         reason=reason))
+                            if on_event is not None:
+                                on_event(retry_event(report.retried[-1]))
                             submit(i)
                         else:
                             results[i] = SetAside(item=i, label=label(i, items[i]), attempts=attempts[i],

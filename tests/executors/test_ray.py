@@ -70,8 +70,8 @@ def test_losing_a_worker_node_mid_run_loses_no_item_and_duplicates_none(cluster,
     names = [f"u{i}" for i in range(6)]
     ran_on_doomed: list[str] = []
 
-    def on_event(ev: dict) -> None:
-        if ev["node"] == doomed.node_id:
+    def on_event(ev) -> None:
+        if isinstance(ev, dict) and ev["node"] == doomed.node_id:
             ran_on_doomed.append(ev["item"])
             if len(ran_on_doomed) == 1:  # its first item is in flight: pull the node
                 c.remove_node(doomed)
