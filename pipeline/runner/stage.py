@@ -37,7 +37,7 @@ class UnitResult(BaseModel):
     status: str | None = None
     reason: str | None = None
     detail: str | None = None
-    inputs: str | None = None  # fingerprint taken before the unit's inputs were read
+    inputs: Any = None  # fingerprint (str or dict) taken before the unit's inputs were read
 
     @classmethod
     def set_aside(cls, reason: str, detail: str = "") -> UnitResult:
@@ -67,7 +67,7 @@ class Stage(ABC, Generic[U]):
         """Name of the unit's done marker (a stage may add e.g. the model that made it)."""
         return self.unit_id(unit)
 
-    def fingerprint(self, unit: U) -> str | None:
+    def fingerprint(self, unit: U) -> Any:
         """What the unit's outputs are computed from (recorded in its marker as `inputs`);
         a done unit whose fingerprint changed runs again. None: inputs never change."""
         return None

@@ -1,0 +1,94 @@
+"""Stage 2 as a `Stage` (pipeline/runner/stage.py): one unit per failed episode.
+
+Units: the failed EpisodeRecords of the stage-1 manifest (`pending.read_failures`, which
+also sets aside manifest rows that make no record). Per episode the worker takes the task's
+environment from its `WorkerContext` and runs `process_episode` with the stored VLM answer
+(vlm_step.py); the runner then writes `_done/<suite>__<task>__<episode_id>.done` holding
+`{"status", "reason", "inputs"}`, `inputs` being `layout.fingerprint` taken before the
+files were read, so a changed input is done again (`forget` drops its old VLM answer and
+scene first). A per-episode EpisodeError has already become a quarantine entry (marked
+done); any other error of one episode (not a FatalError) is set aside as an
+`episode_error` entry without a marker, so the next run tries it again. Episodes of one
+task share one shard (one environment build).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from pipeline.atomic import write_json
+from pipeline.config import Config
+from pipeline.records import EpisodeRecord, QuarantineEntry
+from pipeline.runner import Stage, UnitResult, WorkerContext
+from pipeline.stage2.layout import Stage2Paths, fingerprint, unit_id
+
+
+@dataclass
+class Stage2(Stage[EpisodeRecord]):
+    cfg: Config
+    name: str = "stage 2"
+    counts: dict[str, int] = field(default_factory=dict)  # failed / successes, set by `units`
+
+    @property
+    def root(self) -> Path:
+        return self.cfg.out / "stage2"
+
+    @property
+    def paths(self) -> Stage2Paths:
+        return Stage2Paths(self.root)
+
+    def units(self, cfg: Config) -> list[EpisodeRecord]:
+        from pipeline.stage2.pending import read_failures
+
+        failed, n_failed, n_success = read_failures(cfg, self.paths)
+        self.counts = {"failed": n_failed, "successes": n_success}
+        return failed
+
+    def unit_id(self, rec: EpisodeRecord) -> str:
+        return unit_id(rec)
+
+    def fingerprint(self, rec: EpisodeRecord) -> dict[str, str]:
+        return fingerprint(self.cfg.out / "stage1", rec)
+
+    def forget(self, rec: EpisodeRecord) -> None:
+        from pipeline.stage2.pending import forget
+
+        forget(self.paths, rec)  # its inputs changed since: the stored answers are about old files
+
+    def group(self, rec: EpisodeRecord):
+        return rec.suite, rec.task
+
+    def shards(self, units: list[EpisodeRecord], workers: int) -> list[tuple[EpisodeRecord, ...]]:
+        by_task: dict[tuple[str, str], list[EpisodeRecord]] = {}
+        for rec in units:  # one shard per task, never split: the environment is built once per task
+            by_task.setdefault(self.group(rec), []).append(rec)
+        return [tuple(eps) for _, eps in sorted(by_task.items())]
+
+    def _vlm(self, rec: EpisodeRecord) -> dict[str, Any] | None:
+        backend = self.cfg.stage2.vlm.backend
+        if backend == "simstate":
+            return None
+        vlm_file = self.paths.abs(self.paths.vlm(rec))
+        if vlm_file.exists():
+            return json.loads(vlm_file.read_text())
+        return {"source": backend, "reason": "backend_error", "detail": "no stored VLM result"}
+
+    def process(self, rec: EpisodeRecord, ctx: WorkerContext) -> UnitResult:
+        from pipeline.sim import get_task
+        from pipeline.stage2.episode import process_episode
+
+        env = ctx.env(get_task(rec.suite, rec.task))
+        out = process_episode(env, rec, self.cfg.out / "stage1", self.paths, self.cfg.stage2, self._vlm(rec))
+        return UnitResult(info={"status": out.status, "reason": out.reason}, ok=out.status == "scene",
+                          status=out.status, reason=out.reason or None)
+
+    def set_aside(self, rec: EpisodeRecord, error: Exception) -> UnitResult:
+        paths = self.paths
+        paths.abs(paths.localization(rec)).unlink(missing_ok=True)
+        entry = QuarantineEntry(key=rec.key, stage="stage2", source="stage2", reason="episode_error",
+                                detail=f"{type(error).__name__}: {error}"[:2000])
+        write_json(paths.abs(paths.quarantine(rec)), entry.model_dump(mode="json"))
+        return UnitResult.set_aside(entry.reason, entry.detail)
