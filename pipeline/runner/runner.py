@@ -25,7 +25,7 @@ from pipeline.atomic import Completions
 from pipeline.executors.base import Executor, RunReport, SetAside
 from pipeline.runner.context import WorkerContext
 from pipeline.runner.events import Event
-from pipeline.runner.stage import Stage
+from pipeline.runner.stage import Stage, UnitResult
 
 
 def is_current(marks: Completions, stage: Stage, unit: Any) -> bool:
@@ -46,7 +46,9 @@ def run_shard(job: tuple[Stage, tuple], ctx: WorkerContext) -> int:
     marks = Completions(stage.root)
     todo = [u for u in units if not is_current(marks, stage, u)]
     ran = 0
-    for unit, result in stage.stream(todo, ctx):
+
+    def finish(unit: Any, result: UnitResult) -> None:
+        nonlocal ran
         if result.done:
             info = dict(result.info)
             if result.inputs is not None:
@@ -55,6 +57,8 @@ def run_shard(job: tuple[Stage, tuple], ctx: WorkerContext) -> int:
             stage.after_done(unit, result)
             ran += 1
         ctx.emit(stage.event("done" if result.done else "set_aside", unit, result))
+
+    stage.stream(todo, ctx, finish)
     return ran
 
 

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
-from collections.abc import Hashable, Iterator
+from collections.abc import Callable, Hashable
 from pathlib import Path
 from typing import Any, Generic, TypeVar
 
@@ -108,9 +108,10 @@ class Stage(ABC, Generic[U]):
         ids = [self.unit_id(u) for u in shard]
         return ids[0] if len(ids) == 1 else f"{ids[0]} (+{len(ids) - 1})"
 
-    def stream(self, units: list[U], ctx: WorkerContext) -> Iterator[tuple[U, UnitResult]]:
-        """Process a shard's units, yielding each with its result as it completes. A stage
-        that finishes units out of order (stage 1's videos) overrides this."""
+    def stream(self, units: list[U], ctx: WorkerContext, finish: Callable[[U, UnitResult], None]) -> None:
+        """Process a shard's units, calling `finish(unit, result)` as each completes (the
+        runner writes its marker then). A stage that finishes units out of order (stage 1's
+        videos) overrides this; it must still finish what completed before a FatalError."""
         for unit in units:
             ctx.emit(self.event("started", unit))
             inputs = self.fingerprint(unit)  # before reading: a file changed meanwhile is redone
@@ -122,7 +123,7 @@ class Stage(ABC, Generic[U]):
                 result = self.set_aside(unit, e)
                 if result is None:
                     raise
-            yield unit, result.model_copy(update={"inputs": inputs})
+            finish(unit, result.model_copy(update={"inputs": inputs}))
 
     def event(self, kind: str, unit: U, result: UnitResult | None = None):
         from pipeline.runner.events import Event
