@@ -99,5 +99,7 @@ def test_local_and_ray_executors_emit_the_same_events(tmp_path):
         _runner(ex).run(stage, None, on_event=events.append)
         assert all(isinstance(e, Event) for e in events)
         shapes.append(_shape(events))
+        # every kind of worker (process, this process, Ray actor) keeps its context across units
+        assert max(n for u in NAMES for _, n in _runs(tmp_path / name, u)) >= 3
     assert shapes[0] == shapes[1] == shapes[2]
     assert [k for _, k, *_ in shapes[0]].count("set_aside") == 1 and len(shapes[0]) == 10  # started + outcome
