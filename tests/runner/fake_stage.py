@@ -18,13 +18,14 @@ from pipeline.runner import Stage, UnitResult, WorkerContext
 
 
 class Counter:
-    """A per-worker helper: counts the units its worker ran (what a cached env relies on)."""
+    """A per-worker helper: counts the units its worker ran (what a cached env relies on) and
+    leaves `closed/<pid>` behind when its worker closes its context."""
 
-    def __init__(self):
-        self.n = 0
+    def __init__(self, folder: Path):
+        self.n, self.folder = 0, folder
 
     def close(self) -> None:
-        pass
+        write_text(self.folder / "closed" / str(os.getpid()), f"{self.n}\n")
 
 
 @dataclass
@@ -52,7 +53,7 @@ class FakeStage(Stage):
 
     def process(self, unit: str, ctx: WorkerContext) -> UnitResult:
         mode = self.modes.get(unit, "")
-        counter = ctx.helper("counter", Counter)
+        counter = ctx.helper("counter", lambda: Counter(self.root))
         counter.n += 1
         runs = self.root / "runs"
         runs.mkdir(parents=True, exist_ok=True)

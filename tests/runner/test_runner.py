@@ -79,6 +79,8 @@ def test_a_worker_keeps_its_context_across_units_and_closes_it_when_the_run_ends
     runs = [_runs(tmp_path, n)[0] for n in NAMES]
     assert len({pid for pid, _ in runs}) == 1 and sorted(n for _, n in runs) == [1, 2, 3, 4, 5]
     assert os.getpid() not in {pid for pid, _ in runs}
+    [closed] = (tmp_path / "closed").iterdir()  # the worker closed its context on a clean stop
+    assert int(closed.name) == runs[0][0] and closed.read_text() == "5\n"
 
 
 def _shape(events: list) -> list[tuple]:
