@@ -14,13 +14,12 @@ task share one shard (one environment build).
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 from pipeline.atomic import write_json
 from pipeline.config import Config
+from pipeline.labelers.base import Onset
 from pipeline.records import EpisodeRecord, QuarantineEntry
 from pipeline.runner import Stage, UnitResult, WorkerContext
 from pipeline.stage2.layout import Stage2Paths, fingerprint, unit_id
@@ -67,21 +66,26 @@ class Stage2(Stage[EpisodeRecord]):
             by_task.setdefault(self.group(rec), []).append(rec)
         return [tuple(eps) for _, eps in sorted(by_task.items())]
 
-    def _vlm(self, rec: EpisodeRecord) -> dict[str, Any] | None:
+    def _stored_onset(self, rec: EpisodeRecord) -> Onset | None:
+        """The VLM step's answer for `rec` (None for simstate, which localizes in the worker)."""
         backend = self.cfg.stage2.vlm.backend
         if backend == "simstate":
             return None
-        vlm_file = self.paths.abs(self.paths.vlm(rec))
-        if vlm_file.exists():
-            return json.loads(vlm_file.read_text())
-        return {"source": backend, "reason": "backend_error", "detail": "no stored VLM result"}
+        file = self.paths.abs(self.paths.vlm(rec))
+        if not file.exists():
+            return Onset(source=backend, reason="backend_error", detail="no stored VLM result")
+        try:
+            return Onset.model_validate_json(file.read_text())
+        except ValueError as e:  # ValidationError included: this episode is set aside (episode_error), naming the file
+            raise ValueError(f"{file}: not a stored VLM answer: {e}") from e
 
     def process(self, rec: EpisodeRecord, ctx: WorkerContext) -> UnitResult:
         from pipeline.sim import get_task
         from pipeline.stage2.episode import process_episode
 
         env = ctx.env(get_task(rec.suite, rec.task))
-        out = process_episode(env, rec, self.cfg.out / "stage1", self.paths, self.cfg.stage2, self._vlm(rec))
+        vlm = self._stored_onset(rec)
+        out = process_episode(env, rec, self.cfg.out / "stage1", self.paths, self.cfg.stage2, vlm)
         return UnitResult(info={"status": out.status, "reason": out.reason}, ok=out.status == "scene",
                           status=out.status, reason=out.reason or None)
 

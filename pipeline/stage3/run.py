@@ -34,14 +34,15 @@ from rich.console import Console
 
 from pipeline.atomic import write_json
 from pipeline.config import Config, save_resolved
+from pipeline.errors import FatalError
 from pipeline.executors.local import InlineExecutor
 from pipeline.records import Characterization, QuarantineEntry
 from pipeline.review.db import write_session
 from pipeline.review.enqueue import enqueue
 from pipeline.review.server import engine_for
+from pipeline.labelers.registry import make_characterizer
 from pipeline.runner import Runner, Stage, UnitResult, WorkerContext
-from pipeline.stage3.characterizers import make_characterizer
-from pipeline.stage3.inputs import INPUT_FAULTS, Unit, collect, context, fingerprint
+from pipeline.stage3.inputs import INPUT_FAULTS, UNREADABLE, Unit, collect, context, fingerprint, warn_unreadable
 
 BATCH = 16
 
@@ -77,7 +78,7 @@ class Stage3(Stage[Unit]):
 
     cfg: Config
     engine: Any
-    characterize: Any  # the characterizer (pipeline.stage3.characterizers), None with nothing to characterize
+    characterize: Any  # the Characterizer (pipeline.labelers), None with nothing to characterize
     name: str = "stage 3"
 
     def __post_init__(self):
@@ -109,7 +110,11 @@ class Stage3(Stage[Unit]):
             batch = units[start:start + BATCH]
             inputs = [self.fingerprint(u) for u in batch]  # before reading the files
             locs = [u.localization for u in batch if u.localization is not None]
-            outcomes = iter(self.characterize(locs) if locs else [])
+            got = self.characterize.characterize(locs) if locs else []
+            if len(got) != len(locs):  # a lost outcome would shift every later one onto the wrong episode
+                raise FatalError(f"stage 3: characterizer {self.characterize.name} gave {len(got)} outcomes "
+                                 f"for {len(locs)} localizations")
+            outcomes = iter(got)
             for unit, fp in zip(batch, inputs, strict=True):
                 outcome = next(outcomes) if unit.localization is not None else unit.quarantine
                 status = _store(run_dir, cfg, self.engine, unit, outcome, hz, fps)
@@ -129,12 +134,12 @@ def run(cfg: Config) -> dict:
     counts: Counter = Counter(skipped=len(units) - len(todo))
     if not units:
         console.print(f"[yellow]stage 3: nothing to do[/yellow]: no stage-2 outputs under {run_dir / 'stage2'}")
-    stage.characterize = make_characterizer(cfg) if any(u.localization for u in todo) else None
+    stage.characterize = make_characterizer(cfg.stage3.vlm, run_dir) if any(u.localization for u in todo) else None
     stage.name = f"stage 3: characterize + enqueue ({stage.characterize.name if stage.characterize else '-'})"
     try:
         counts.update(runner.execute(stage, todo).statuses)
     finally:
-        if stage.characterize is not None and hasattr(stage.characterize, "close"):
+        if stage.characterize is not None:
             stage.characterize.close()
     faults = [u.quarantine for u in units if u.quarantine and u.quarantine.stage == "stage3"
               and u.quarantine.reason in INPUT_FAULTS]
@@ -200,7 +205,8 @@ def _instruction(run_dir: Path, unit: Unit) -> str:
         suite, task, ep = unit.key.split("/", 2)
         try:
             rows = pq.read_table(manifest, columns=["suite", "task", "episode_id", "instruction"]).to_pylist()
-        except Exception:  # an unreadable manifest is stage 2's to report; the key still names the task
+        except UNREADABLE as e:  # an unreadable manifest is stage 2's to report; the key still names the task
+            warn_unreadable(manifest, e, "the instruction is made from the task name")
             rows = []
         for row in rows:
             if (row["suite"], row["task"], row["episode_id"]) == (suite, task, ep) and row["instruction"]:
