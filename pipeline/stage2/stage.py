@@ -20,7 +20,7 @@ from pathlib import Path
 from pipeline.atomic import write_json
 from pipeline.config import Config
 from pipeline.labelers.base import Onset
-from pipeline.records import EpisodeRecord, QuarantineEntry
+from pipeline.records import EpisodeRecord, QuarantineEntry, QuarantineReason
 from pipeline.runner import Stage, UnitResult, WorkerContext
 from pipeline.stage2.layout import Stage2Paths, fingerprint, unit_id
 
@@ -73,7 +73,7 @@ class Stage2(Stage[EpisodeRecord]):
             return None
         file = self.paths.abs(self.paths.vlm(rec))
         if not file.exists():
-            return Onset(source=backend, reason="backend_error", detail="no stored VLM result")
+            return Onset(source=backend, reason=QuarantineReason.backend_error, detail="no stored VLM result")
         try:
             return Onset.model_validate_json(file.read_text())
         except ValueError as e:  # ValidationError included: this episode is set aside (episode_error), naming the file
@@ -92,7 +92,8 @@ class Stage2(Stage[EpisodeRecord]):
     def set_aside(self, rec: EpisodeRecord, error: Exception) -> UnitResult:
         paths = self.paths
         paths.abs(paths.localization(rec)).unlink(missing_ok=True)
-        entry = QuarantineEntry(key=rec.key, stage="stage2", source="stage2", reason="episode_error",
+        entry = QuarantineEntry(key=rec.key, stage="stage2", source="stage2",
+                                reason=QuarantineReason.episode_error,
                                 detail=f"{type(error).__name__}: {error}"[:2000])
         write_json(paths.abs(paths.quarantine(rec)), entry.model_dump(mode="json"))
         return UnitResult.set_aside(entry.reason, entry.detail)
