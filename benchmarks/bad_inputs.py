@@ -296,7 +296,7 @@ def _(tmp):
         seen = []
 
         def on_event(ev) -> None:
-            if ev["node"] == doomed.node_id and not seen:
+            if isinstance(ev, dict) and ev["node"] == doomed.node_id and not seen:  # not a retry Event
                 seen.append(ev["item"])
                 cluster.remove_node(doomed)
 

@@ -176,7 +176,7 @@ class VideoConfig(_Strict):
 
 
 class ExecutorConfig(_Strict):
-    kind: Literal["local", "ray"] = "local"
+    kind: Literal["local", "ray", "inline"] = "local"  # inline: one worker, the calling process
     workers: int = Field(default=2, ge=1)
     ray_address: str | None = None
     # times an item is run again after its worker died under it (kill -9, OOM, a lost Ray

@@ -13,14 +13,9 @@ import pyarrow.parquet as pq
 
 from pipeline.atomic import file_stamp
 from pipeline.errors import EpisodeError
-from pipeline.layout import Stage1Layout, Stage2Layout
+from pipeline.layout import Stage1Layout
 from pipeline.layout import unit_id as layout_unit_id
 from pipeline.records import EpisodeRecord
-
-# the old name of pipeline.layout.Stage2Layout, kept only for code written against it before
-# the layout moved (nothing in pipeline/ uses it)
-Stage2Paths = Stage2Layout
-
 
 def unit_id(rec: EpisodeRecord) -> str:
     """Done-marker name of an episode (a file name: no slashes)."""

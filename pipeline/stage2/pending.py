@@ -1,12 +1,10 @@
-"""Which failed episodes stage 2 still has to do, and the manifest rows it sets aside.
+"""Stage 2's units: the failed episodes of the manifest, and the manifest rows it sets aside.
 
-Input: `stage1/episodes.parquet`, read row by row (records.read_episode_rows), and the done
-markers under `stage2/_done/`. Output: the failed EpisodeRecords to (re)do. A marker counts
-only while the episode's inputs are what it recorded (layout.fingerprint: size + mtime of the
-stage-1 files, a hash of the manifest row); a marker from before fingerprints counts as done.
-A row that makes no record becomes `quarantine/<key>.json` (reason `stage1_bad_manifest`,
-file and field named) and goes away once the row reads again. Only a manifest that cannot be
-read at all is fatal.
+Input: `stage1/episodes.parquet`, read row by row (records.read_episode_rows). Output: the
+failed EpisodeRecords (the runner skips those whose done marker still names their inputs,
+layout.fingerprint). A row that makes no record becomes `quarantine/<key>.json` (reason
+`stage1_bad_manifest`, file and field named) and goes away once the row reads again. Only a
+manifest that cannot be read at all is fatal.
 """
 
 from __future__ import annotations
@@ -14,19 +12,16 @@ from __future__ import annotations
 import json
 import shutil
 
-from pipeline.atomic import Completions, write_json
+from pipeline.atomic import write_json
 from pipeline.config import Config
 from pipeline.layout import RunLayout, Stage2Layout
 from pipeline.errors import FatalError
 from pipeline.records import EpisodeRecord, ManifestProblem, QuarantineEntry, QuarantineReason, read_episode_rows
-from pipeline.stage2.layout import fingerprint, unit_id
 
 
-def pending_failures(cfg: Config, paths: Stage2Layout) -> tuple[list[EpisodeRecord], int, int]:
-    """(failed episodes not yet done, failed total, successes skipped). A failed episode is
-    done when its marker exists and names the inputs it has now (layout.fingerprint); markers
-    written before fingerprints existed count as done. Manifest rows that make no record are
-    set aside here (`stage1_bad_manifest`), the rest go on."""
+def read_failures(cfg: Config, paths: Stage2Layout) -> tuple[list[EpisodeRecord], int, int]:
+    """(failed episodes, failed total, successes skipped). Manifest rows that make no record
+    are set aside here (`stage1_bad_manifest`), the rest go on."""
     layout = RunLayout.of(cfg)
     manifest = layout.stage1.manifest
     if not manifest.exists():
@@ -37,18 +32,8 @@ def pending_failures(cfg: Config, paths: Stage2Layout) -> tuple[list[EpisodeReco
         raise FatalError(f"{manifest}: unreadable stage 1 manifest ({type(e).__name__}: {e})") from None
     _set_aside_manifest_rows(paths, problems, layout.rel(manifest).as_posix())
     failed = [e for e in episodes if not e.success]
-    done = Completions(paths.root)
-    done_ids = done.done_ids()
-    todo = []
-    for e in failed:
-        if unit_id(e) in done_ids:
-            recorded = (done.info(unit_id(e)) or {}).get("inputs")
-            if recorded is None or recorded == fingerprint(layout.stage1.root, e):
-                continue
-            _forget(paths, e)  # its inputs changed since: the stored answers are about old files
-        todo.append(e)
     n_success = len(episodes) - len(failed) + sum(p.success is True for p in problems)
-    return todo, len(failed) + sum(p.success is not True for p in problems), n_success
+    return failed, len(failed) + sum(p.success is not True for p in problems), n_success
 
 
 def _set_aside_manifest_rows(paths: Stage2Layout, problems: list[ManifestProblem], manifest: str) -> None:
@@ -76,7 +61,7 @@ def _set_aside_manifest_rows(paths: Stage2Layout, problems: list[ManifestProblem
             write_json(target, entry)
 
 
-def _forget(paths: Stage2Layout, rec: EpisodeRecord) -> None:
+def forget(paths: Stage2Layout, rec: EpisodeRecord) -> None:
     """Drop what an episode's old inputs produced that the redo would not overwrite."""
     paths.abs(paths.vlm(rec)).unlink(missing_ok=True)  # the VLM is asked again about the new video
     shutil.rmtree(paths.scene_dir(rec.key), ignore_errors=True)

@@ -8,7 +8,7 @@ an `Onset` (pipeline.labelers.base) stored as `stage2/vlm/<suite>/<task>/<episod
     {"source", "model", "prompt_name", "prompt_hash", "raw_text", "latency_s",
      "fail_time_s"}                      -- a usable answer, or
     {..., "reason", "detail"}           -- the parser's / backend's quarantine reason.
-The episode workers read these files (pipeline/stage2/worker.py). Requests go in batches of
+The episode workers read these files (pipeline/stage2/stage.py). Requests go in batches of
 `BATCH` so a crash loses at most one batch; episodes with a stored file are skipped.
 """
 

@@ -18,7 +18,7 @@ from tests.eval.conftest import HoldPolicy
 def _config(tmp_path: Path, fixture_run, **eval_overrides) -> Path:
     raw = {
         "run": {"name": "evaltest", "output_dir": str(tmp_path / "run"), "seed": 0},
-        "executor": {"kind": "local", "workers": 1},
+        "executor": {"kind": "inline"},  # the patched policy factory lives in this process
         "eval": {"scenes_dir": str(fixture_run.scenes), "stage1_dir": str(fixture_run.stage1),
                  "trials_per_condition": 2, "horizon": 6, "gripper_settle_steps": 20} | eval_overrides,
     }
@@ -37,7 +37,7 @@ def hold_policies(monkeypatch):
 
     monkeypatch.setattr("pipeline.policies.factory.make_policy", make)
     yield built
-    assert eval_run._ENVS is None and eval_run._POLICIES == {}  # an inline run releases what it built
+    assert all(p.closed for p in built)  # an inline run releases what it built
 
 
 @pytest.mark.sim
@@ -96,7 +96,7 @@ def test_a_scene_with_a_broken_state_is_quarantined_with_its_reason(tmp_path, fi
 def test_recover_eval_runs_the_scripted_policy_on_two_workers(tmp_path, fixture_run):
     cfg_path = _config(tmp_path, fixture_run, trials_per_condition=1, horizon=200, rd_every_steps=40)
     raw = yaml.safe_load(cfg_path.read_text())
-    raw["executor"]["workers"] = 2
+    raw["executor"] = {"kind": "local", "workers": 2}
     cfg_path.write_text(yaml.safe_dump(raw))
     recover = Path(sys.executable).with_name("recover")
     proc = subprocess.run([str(recover), "eval", "--config", str(cfg_path)], capture_output=True, text=True,
