@@ -40,6 +40,7 @@ from pipeline.records import Category, Characterization, Level, Localization, Si
 
 MOVED_M, FAR_M, OBSTRUCT_M, PLACE_NEAR_M = 0.01, 0.05, 0.15, 0.10
 TILT_DEG, TOPPLE_DEG = 10.0, 45.0
+CAUSE_S = 1.0  # an event this soon after a goal regression is what undid the goal
 
 
 def readable(name: str, known: list[str] = ()) -> str:
@@ -72,9 +73,14 @@ def _place_phrase(goal: list[list[str]], known: list[str]) -> str:
 def _onset_event(loc: Localization) -> SimEvent | None:
     at = [e for e in loc.events if e.step == loc.fail_step]
     if at:
-        return at[0]
-    near = [e for e in loc.events if abs(e.time_s - loc.fail_time_s) <= 1.0]
-    return min(near, key=lambda e: abs(e.time_s - loc.fail_time_s)) if near else None
+        event = at[0]
+    else:
+        near = [e for e in loc.events if abs(e.time_s - loc.fail_time_s) <= 1.0]
+        event = min(near, key=lambda e: abs(e.time_s - loc.fail_time_s)) if near else None
+    if event is not None and event.kind == "goal_regression":  # a symptom: name its cause when one follows
+        cause = [e for e in loc.events if e.kind != "goal_regression" and 0 <= e.time_s - event.time_s <= CAUSE_S]
+        event = cause[0] if cause else event
+    return event
 
 
 def _changes(ev: Evidence, a: int, b: int) -> dict[str, dict]:
@@ -120,7 +126,7 @@ def _category(ev: Evidence, event: SimEvent | None, fixtures: list[str]) -> Cate
         return Category.object_displacement if (obj is None or obj in ev.targets) else Category.collision_or_interaction_failure
     if k == "robot_contact_non_target":
         return Category.environmental_obstruction if obj in fixtures else Category.collision_or_interaction_failure
-    if k == "object_collision":
+    if k in ("object_collision", "part_not_operated"):
         return Category.collision_or_interaction_failure
     return Category.other
 

@@ -147,4 +147,5 @@ def test_events_come_back_sorted_by_step():
     ev.per_object["eef_distance"]["bowl_1"][:] = 0.05
     for t in range(5, 12):
         ev.contacts[t] = ["cup_1|robot"]
+    ev.per_object["position"]["cup_1"][8:, 1] = 0.04
     assert [e.step for e in detect_events(ev)] == [5, 40]
