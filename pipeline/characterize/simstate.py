@@ -6,7 +6,7 @@ Output: `pipeline.records.Characterization` with source "simstate" (raw_text hol
 measurements the decision used, for reviewers).
 
 What the failure did is measured between the onset state and the end of the during-failure
-phase (the scene once stable again), per object: how far it moved, its tilt, whether the
+phase (the scene once stable again), but at least MIN_EFFECT_STEPS past the onset, per object: how far it moved, its tilt, whether the
 robot still holds it.
 
 Level (first rule that matches):
@@ -19,12 +19,13 @@ Level (first rule that matches):
       (including a displaced non-target that obstructs nothing);
 - L1  nothing changed (e.g. a missed grasp): retrying the action suffices.
 Category from the onset event (the event at the onset step; for a VLM onset the nearest
-event within 1 s): grasp_missed / grasp_lost -> grasp_failure; object_dropped ->
+event within 1 s; when that is a goal regression, the first other event within CAUSE_S after
+it, which is what undid the goal): grasp_missed / grasp_lost -> grasp_failure; object_dropped ->
 placement_failure if released within PLACE_NEAR_M of its reference, else grasp_failure;
 object_toppled / unintended_displacement / goal_regression -> object_displacement when it is
 the target, collision_or_interaction_failure for another object; robot_contact_non_target
 -> environmental_obstruction for a fixture, collision_or_interaction_failure for an object;
-object_collision -> collision_or_interaction_failure; no event -> other.
+object_collision, part_not_operated -> collision_or_interaction_failure; no event -> other.
 Action: a template per (level, category) naming the objects, e.g. "Re-grasp the akita black
 bowl and place it on the plate".
 """
@@ -40,6 +41,7 @@ from pipeline.records import Category, Characterization, Level, Localization, Si
 
 MOVED_M, FAR_M, OBSTRUCT_M, PLACE_NEAR_M = 0.01, 0.05, 0.15, 0.10
 TILT_DEG, TOPPLE_DEG = 10.0, 45.0
+MIN_EFFECT_STEPS = 20  # measure the change at least 1 s past the onset (a topple takes that long)
 CAUSE_S = 1.0  # an event this soon after a goal regression is what undid the goal
 
 
@@ -151,7 +153,7 @@ def _action(level: Level, category: Category, ev: Evidence, obstacle: str | None
 
 def characterize(loc: Localization, ev: Evidence) -> Characterization:
     onset = min(loc.fail_step, len(ev) - 1)
-    end = min(max(loc.phases.during[1] - 1, onset), len(ev) - 1)
+    end = min(max(loc.phases.during[1] - 1, onset + 40), len(ev) - 1)
     ch = _changes(ev, onset, end)
     level, obstacle = _level(ev, ch, end)
     event = _onset_event(loc)
