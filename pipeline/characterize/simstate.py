@@ -26,8 +26,10 @@ object_toppled / unintended_displacement / goal_regression -> object_displacemen
 the target, collision_or_interaction_failure for another object; robot_contact_non_target
 -> environmental_obstruction for a fixture, collision_or_interaction_failure for an object;
 object_collision, part_not_operated -> collision_or_interaction_failure; no event -> other.
-Action: a template per (level, category) naming the objects, e.g. "Re-grasp the akita black
-bowl and place it on the plate".
+Action: `pipeline.characterize.wording.recovery_action` for the object the onset event
+concerns (else the goal's first conjunct), e.g. "Pick the black bowl up again and put it on
+the plate", "Push the other black bowl aside, then grasp the black bowl and put it on the
+plate".
 """
 
 from __future__ import annotations
@@ -36,40 +38,14 @@ import json
 
 import numpy as np
 
-from pipeline.evidence import Evidence, owner_of
+from pipeline.characterize.wording import recovery_action
+from pipeline.evidence import Evidence
 from pipeline.records import Category, Characterization, Level, Localization, SimEvent
 
 MOVED_M, FAR_M, OBSTRUCT_M, PLACE_NEAR_M = 0.01, 0.05, 0.15, 0.10
 TILT_DEG, TOPPLE_DEG = 10.0, 45.0
 MIN_EFFECT_STEPS = 20  # measure the change at least 1 s past the onset (a topple takes that long)
 CAUSE_S = 1.0  # an event this soon after a goal regression is what undid the goal
-
-
-def readable(name: str, known: list[str] = ()) -> str:
-    """'akita_black_bowl_1' -> 'akita black bowl' ('akita black bowl 1' when `known` holds
-    another object of that kind); 'main_table' -> 'table'."""
-    def base(n: str) -> str:
-        return " ".join(p for p in n.split("_") if not p.isdigit())
-
-    text = base(name)
-    if any(k != name and base(k) == text for k in known):
-        return name.replace("_", " ")
-    return "table" if text == "main table" else text
-
-
-def _place_phrase(goal: list[list[str]], known: list[str]) -> str:
-    phrases = []
-    for pred, *args in goal:
-        p = pred.lower()
-        if p in ("on", "in") and len(args) == 2:
-            owner = owner_of(args[1], known)
-            region = args[1][len(owner) + 1 :].replace("_region", "").replace("_", " ").strip() if owner != args[1] else ""
-            where = f"the {region} of the {readable(owner)}" if region and region != "contain" else f"the {readable(owner)}"
-            phrases.append(f"{'place it on' if p == 'on' else 'put it in'} {where}")
-        elif p in ("open", "close", "turnon", "turnoff"):
-            verb = {"open": "open", "close": "close", "turnon": "turn on", "turnoff": "turn off"}[p]
-            phrases.append(f"{verb} the {readable(owner_of(args[0], known))}")
-    return " and ".join(dict.fromkeys(phrases)) or "complete the task"
 
 
 def _onset_event(loc: Localization) -> SimEvent | None:
@@ -133,24 +109,6 @@ def _category(ev: Evidence, event: SimEvent | None, fixtures: list[str]) -> Cate
     return Category.other
 
 
-def _action(level: Level, category: Category, ev: Evidence, obstacle: str | None, toppled: bool) -> str:
-    known = ev.objects + ev.fixtures
-    place = _place_phrase(ev.goal, known)
-    if not ev.targets:  # fixture goals: open / close / turn on / turn off
-        text = f"{place[0].upper()}{place[1:]} again"  # an imperative, e.g. "Open the wooden cabinet again"
-    else:
-        target = " and the ".join(readable(t, known) for t in ev.targets)
-        if level is Level.L4 and obstacle:
-            text = f"Move the {readable(obstacle, known)} out of the way, then grasp the {target} and {place}"
-        elif level is Level.L3 and toppled:
-            text = f"Set the {target} upright, then grasp it and {place}"
-        elif level is Level.L2 and category is not Category.grasp_failure:
-            text = f"Adjust the approach to the {target} and {place}"
-        else:
-            text = f"Re-grasp the {target} and {place}"
-    return text[:200]
-
-
 def characterize(loc: Localization, ev: Evidence) -> Characterization:
     onset = min(loc.fail_step, len(ev) - 1)
     end = min(max(loc.phases.during[1] - 1, onset + 40), len(ev) - 1)
@@ -158,11 +116,13 @@ def characterize(loc: Localization, ev: Evidence) -> Characterization:
     level, obstacle = _level(ev, ch, end)
     event = _onset_event(loc)
     category = _category(ev, event, ev.fixtures)
-    toppled = any(ch[t]["tilt"] >= TOPPLE_DEG for t in ev.targets if t in ch)
+    about = event.object if event is not None and event.object else (ev.targets[0] if ev.targets else None)
+    toppled = about in ch and ch[about]["tilt"] >= TOPPLE_DEG
     measured = {o: {k: (round(v, 3) if isinstance(v, float) else v) for k, v in c.items() if k != "xy"}
                 for o, c in ch.items()}
     raw = json.dumps({"onset_step": onset, "end_step": end, "event": event.kind if event else None,
                       "obstacle": obstacle, "changes": measured})
     return Characterization(key=loc.key, recovery_level=level, failure_category=category,
-                            recovery_action=_action(level, category, ev, obstacle, toppled), source="simstate",
+                            recovery_action=recovery_action(level, category, ev.goal, ev.objects, ev.fixtures, about, obstacle,
+                                                            toppled), source="simstate",
                             raw_text=raw)

@@ -29,10 +29,11 @@ Rules:
   release or a slip that tips it is that event, an object tipping over inside its
   container is no failure), tilts >= `topple_deg` from its start orientation. Step: the
   last step its tilt was still <= `tilt_start_deg`, plus one.
-- unintended_displacement: an object moves >= `displace_m` from its start (a reference
-  >= `ref_displace_m`: a basket nudged by what is put into it is no failure) before it is
-  first held; a target's motion only counts before the first close near it (the closing
-  fingers moving it are the grasp). Step: the first step of that motion (displacement
+- unintended_displacement: an object moves >= `displace_m` from its start (a target or a
+  reference >= `own_displace_m`: a nudge on the way to a grasp that then holds, or a
+  basket nudged by what is put into it, is no failure) before it is first held; a target's
+  motion only counts before the first close near it (the closing fingers moving it are the
+  grasp). Step: the first step of that motion (displacement
   >= `motion_m`).
 - robot_contact_non_target: the robot touches an object that is neither a target nor a
   reference and moves it >= `displace_m` meanwhile (a touch that moves nothing is no
@@ -75,7 +76,7 @@ class Thresholds:
     topple_deg: float = 45.0
     tilt_start_deg: float = 10.0
     displace_m: float = 0.02  # the truth's knock: an object pushed 2 cm
-    ref_displace_m: float = 0.05  # a reference must move this far
+    own_displace_m: float = 0.05  # a target (before its grasp) or a reference must move this far
     motion_m: float = 0.003
     fixture_contact_steps: int = 40  # 2 s pressed against a fixture the goal does not involve
     operate_steps: int = 10  # contact with an operated fixture that is an attempt to operate it
@@ -200,7 +201,7 @@ def displaced(ev: Evidence, th: Thresholds) -> list[SimEvent]:
         held = np.flatnonzero([g == obj for g in ev.grasped])
         stop = min(int(held[0]) if len(held) else len(ev), first_close.get(obj, len(ev)))
         disp = ev.col("displacement", obj)[:stop]
-        limit = th.ref_displace_m if obj in ev.references else th.displace_m
+        limit = th.own_displace_m if obj in ev.references or obj in ev.targets else th.displace_m
         far = np.flatnonzero(disp >= limit)
         if len(far):
             k = int(far[0])
