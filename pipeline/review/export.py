@@ -4,6 +4,9 @@ Inputs: the review database.
 Outputs (under `root`, default `<run>/stage3/annotations/`):
   <suite>/<task>/episode_<episode_id>.json   one `records.Annotation` each
   annotations.parquet                         the same records, flat (ANNOTATION_SCHEMA)
+  model_vs_truth.json                         when the scripted generator wrote a truth: the
+                                              model proposals and final records vs it
+                                              (`pipeline.review.truth_view`)
 Invariants: only final items are exported (never pending, conflict or excluded ones);
 per episode the newest final revision wins; every file is written atomically and
 validated against the pydantic model first; the folder mirrors the database exactly
@@ -22,6 +25,7 @@ from sqlalchemy.orm import Session
 from pipeline import SCHEMA_VERSION
 from pipeline.atomic import write_json, write_text, write_with
 from pipeline.records import Annotation, AnnotationAdjudication, AnnotationProposal, AnnotationReview
+from pipeline.review import truth_view
 from pipeline.review.audit import iso
 from pipeline.review.db import FINAL, Adjudication, Item, Review, User
 
@@ -83,9 +87,11 @@ def final_items(s: Session) -> list[Item]:
     return [i for i in newest.values() if i.resolution != "excluded" and i.final]
 
 
-def export(s: Session, root: str | Path) -> list[Path]:
+def export(s: Session, root: str | Path, run_dir: str | Path | None = None, control_hz: int = 20,
+           tau: float = 1.0) -> list[Path]:
     root = Path(root)
-    records = [annotation(s, item) for item in final_items(s)]
+    finals = final_items(s)
+    records = [annotation(s, item) for item in finals]
     written = []
     for a in records:
         path = file_for(root, a)
@@ -100,6 +106,11 @@ def export(s: Session, root: str | Path) -> list[Path]:
     import pyarrow.parquet as pq
 
     write_with(root / "annotations.parquet", lambda p: pq.write_table(table, p))
+    truth = truth_view.compare(finals, run_dir, tau, control_hz) if run_dir is not None else None
+    if truth is not None:
+        write_json(root / "model_vs_truth.json", truth)
+    elif (root / "model_vs_truth.json").exists():
+        (root / "model_vs_truth.json").unlink()
     return written
 
 
