@@ -21,7 +21,8 @@ Level (first rule that matches):
 Category from the onset event (the event at the onset step; for a VLM onset the nearest
 event within 1 s; when that is a goal regression, the first other event within CAUSE_S after
 it, which is what undid the goal): grasp_missed / grasp_lost -> grasp_failure; object_dropped ->
-placement_failure if released within PLACE_NEAR_M of its reference, else grasp_failure;
+placement_failure if released within PLACE_NEAR_M of its own reference (the one its
+conjunct names) or landing on it within LAND_STEPS, else grasp_failure (a drop in transit);
 object_toppled / unintended_displacement / goal_regression -> object_displacement when it is
 the target, collision_or_interaction_failure for another object; robot_contact_non_target
 -> environmental_obstruction for a fixture, collision_or_interaction_failure for an object;
@@ -39,12 +40,13 @@ import json
 import numpy as np
 
 from pipeline.characterize.wording import recovery_action
-from pipeline.evidence import Evidence
+from pipeline.evidence import Evidence, owner_of
 from pipeline.records import Category, Characterization, Level, Localization, SimEvent
 
 MOVED_M, FAR_M, OBSTRUCT_M, PLACE_NEAR_M = 0.01, 0.05, 0.15, 0.10
 TILT_DEG, TOPPLE_DEG = 10.0, 45.0
 MIN_EFFECT_STEPS = 20  # measure the change at least 1 s past the onset (a topple takes that long)
+LAND_STEPS = 30  # a drop that lands on its reference this soon was released over it
 CAUSE_S = 1.0  # an event this soon after a goal regression is what undid the goal
 
 
@@ -90,6 +92,13 @@ def _level(ev: Evidence, ch: dict[str, dict], end: int) -> tuple[Level, str | No
     return Level.L1, None
 
 
+def _references_of(ev: Evidence, obj: str | None) -> list[str]:
+    """Where the goal puts `obj` (owners of its on/in conjuncts' second argument)."""
+    known = ev.objects + ev.fixtures
+    own = [owner_of(c[2], known) for c in ev.goal if c[0].lower() in ("on", "in") and len(c) == 3 and c[1] == obj]
+    return own or list(ev.references)
+
+
 def _category(ev: Evidence, event: SimEvent | None, fixtures: list[str]) -> Category:
     if event is None:
         return Category.other
@@ -97,9 +106,11 @@ def _category(ev: Evidence, event: SimEvent | None, fixtures: list[str]) -> Cate
     if k in ("grasp_missed", "grasp_lost"):
         return Category.grasp_failure
     if k == "object_dropped":
+        refs = _references_of(ev, obj)
         pos = {o: ev.col("position", o)[event.step, :2] for o in ev.objects}
-        near = any(np.linalg.norm(pos[obj] - pos[r]) <= PLACE_NEAR_M for r in ev.references if r in pos)
-        return Category.placement_failure if near else Category.grasp_failure
+        near = any(np.linalg.norm(pos[obj] - pos[r]) <= PLACE_NEAR_M for r in refs if r in pos)
+        landed = any("|".join(sorted((obj, r))) in c for r in refs for c in ev.contacts[event.step:event.step + LAND_STEPS])
+        return Category.placement_failure if near or landed else Category.grasp_failure
     if k in ("object_toppled", "unintended_displacement", "goal_regression"):
         return Category.object_displacement if (obj is None or obj in ev.targets) else Category.collision_or_interaction_failure
     if k == "robot_contact_non_target":
