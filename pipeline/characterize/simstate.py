@@ -19,12 +19,12 @@ Level (first rule that matches):
       (including a displaced non-target that obstructs nothing);
 - L1  nothing changed (e.g. a missed grasp): retrying the action suffices.
 Category from the onset event (the event at the onset step; for a VLM onset the nearest
-event within 1 s; when that is a goal regression, the first other event within CAUSE_S after
-it, which is what undid the goal): grasp_missed / grasp_lost -> grasp_failure; object_dropped ->
+event within 1 s): grasp_missed / grasp_lost -> grasp_failure; object_dropped ->
 placement_failure if released within PLACE_NEAR_M of its own reference (the one its
 conjunct names) or landing on it within LAND_STEPS, else grasp_failure (a drop in transit);
-object_toppled / unintended_displacement / goal_regression -> object_displacement when it is
-the target, collision_or_interaction_failure for another object; robot_contact_non_target
+object_toppled / unintended_displacement -> object_displacement when it is the target,
+collision_or_interaction_failure for another object; goal_regression (something achieved
+undone, a drawer bumped shut) -> collision_or_interaction_failure; robot_contact_non_target
 -> environmental_obstruction for a fixture, collision_or_interaction_failure for an object;
 object_collision, part_not_operated -> collision_or_interaction_failure; no event -> other.
 Action: `pipeline.characterize.wording.recovery_action` for the object the onset event
@@ -47,20 +47,14 @@ MOVED_M, FAR_M, OBSTRUCT_M, PLACE_NEAR_M = 0.01, 0.05, 0.15, 0.10
 TILT_DEG, TOPPLE_DEG = 10.0, 45.0
 MIN_EFFECT_STEPS = 20  # measure the change at least 1 s past the onset (a topple takes that long)
 LAND_STEPS = 30  # a drop that lands on its reference this soon was released over it
-CAUSE_S = 1.0  # an event this soon after a goal regression is what undid the goal
 
 
 def _onset_event(loc: Localization) -> SimEvent | None:
     at = [e for e in loc.events if e.step == loc.fail_step]
     if at:
-        event = at[0]
-    else:
-        near = [e for e in loc.events if abs(e.time_s - loc.fail_time_s) <= 1.0]
-        event = min(near, key=lambda e: abs(e.time_s - loc.fail_time_s)) if near else None
-    if event is not None and event.kind == "goal_regression":  # a symptom: name its cause when one follows
-        cause = [e for e in loc.events if e.kind != "goal_regression" and 0 <= e.time_s - event.time_s <= CAUSE_S]
-        event = cause[0] if cause else event
-    return event
+        return at[0]
+    near = [e for e in loc.events if abs(e.time_s - loc.fail_time_s) <= 1.0]
+    return min(near, key=lambda e: abs(e.time_s - loc.fail_time_s)) if near else None
 
 
 def _changes(ev: Evidence, a: int, b: int) -> dict[str, dict]:
@@ -111,8 +105,10 @@ def _category(ev: Evidence, event: SimEvent | None, fixtures: list[str]) -> Cate
         near = any(np.linalg.norm(pos[obj] - pos[r]) <= PLACE_NEAR_M for r in refs if r in pos)
         landed = any("|".join(sorted((obj, r))) in c for r in refs for c in ev.contacts[event.step:event.step + LAND_STEPS])
         return Category.placement_failure if near or landed else Category.grasp_failure
-    if k in ("object_toppled", "unintended_displacement", "goal_regression"):
-        return Category.object_displacement if (obj is None or obj in ev.targets) else Category.collision_or_interaction_failure
+    if k in ("object_toppled", "unintended_displacement"):
+        return Category.object_displacement if obj in ev.targets else Category.collision_or_interaction_failure
+    if k == "goal_regression":
+        return Category.collision_or_interaction_failure
     if k == "robot_contact_non_target":
         return Category.environmental_obstruction if obj in fixtures else Category.collision_or_interaction_failure
     if k in ("object_collision", "part_not_operated"):

@@ -27,8 +27,9 @@ Rules:
   command that released it (if within `grasp_window` steps before), else the release.
 - object_toppled: an object not held, and not held in the last `drop_window` steps (a
   release or a slip that tips it is that event, an object tipping over inside its
-  container is no failure), tilts >= `topple_deg` from its start orientation. Step: the
-  last step its tilt was still <= `tilt_start_deg`, plus one.
+  container is no failure), tilts >= `topple_deg` from its start orientation, and was not
+  held since it began tipping. Step: the last step its tilt was still <= `tilt_start_deg`,
+  plus one.
 - unintended_displacement: an object moves >= `displace_m` from its start (a target or a
   reference >= `own_displace_m`: a nudge on the way to a grasp that then holds, or a
   basket nudged by what is put into it, is no failure) before it is first held; a target's
@@ -186,6 +187,8 @@ def toppled(ev: Evidence, th: Thresholds) -> list[SimEvent]:
             k = int(over[0])
             calm = np.flatnonzero(tilt[:k] <= th.tilt_start_deg)
             step = int(calm[-1]) + 1 if len(calm) else 0
+            if held[step:k].any():
+                continue  # it began tipping in the hand: the release or slip is the event
             out.append(_ev(ev, step, "object_toppled", obj, detail=f"tilted {tilt[k]:.0f} deg"))
     return out
 

@@ -149,3 +149,11 @@ def test_events_come_back_sorted_by_step():
         ev.contacts[t] = ["cup_1|robot"]
     ev.per_object["position"]["cup_1"][8:, 1] = 0.04
     assert [e.step for e in detect_events(ev)] == [5, 40]
+
+
+def test_an_object_that_began_tipping_in_the_hand_is_no_topple():
+    ev = make_evidence()
+    ev.grasped[10:20] = ["cup_1"] * 10
+    ev.per_object["tilt_deg"]["cup_1"][15:] = 20.0  # tilted while held
+    ev.per_object["tilt_deg"]["cup_1"][55:] = 60.0  # lies on its side long after the release
+    assert toppled(ev, TH) == []
