@@ -6,8 +6,8 @@ Output: `pipeline.records.Characterization` with source "simstate" (raw_text hol
 measurements the decision used, for reviewers).
 
 What the failure did is measured between the onset state and the end of the during-failure
-phase (the scene once stable again), but at least MIN_EFFECT_STEPS past the onset, per object: how far it moved, its tilt, whether the
-robot still holds it.
+phase (the scene once stable again), but at least MIN_EFFECT_STEPS past the onset, per
+object: how far it moved, its tilt, whether the robot still holds it.
 
 Level (first rule that matches):
 - L4  a non-target object (or a fixture) now obstructs: it moved >= MOVED_M or toppled during
@@ -103,7 +103,8 @@ def _category(ev: Evidence, event: SimEvent | None, fixtures: list[str]) -> Cate
         refs = _references_of(ev, obj)
         pos = {o: ev.col("position", o)[event.step, :2] for o in ev.objects}
         near = any(np.linalg.norm(pos[obj] - pos[r]) <= PLACE_NEAR_M for r in refs if r in pos)
-        landed = any("|".join(sorted((obj, r))) in c for r in refs for c in ev.contacts[event.step:event.step + LAND_STEPS])
+        after = ev.contacts[event.step:event.step + LAND_STEPS]
+        landed = any("|".join(sorted((obj, r))) in c for r in refs for c in after)
         return Category.placement_failure if near or landed else Category.grasp_failure
     if k in ("object_toppled", "unintended_displacement"):
         return Category.object_displacement if obj in ev.targets else Category.collision_or_interaction_failure
@@ -130,6 +131,6 @@ def characterize(loc: Localization, ev: Evidence) -> Characterization:
     raw = json.dumps({"onset_step": onset, "end_step": end, "event": event.kind if event else None,
                       "obstacle": obstacle, "changes": measured})
     return Characterization(key=loc.key, recovery_level=level, failure_category=category,
-                            recovery_action=recovery_action(level, category, ev.goal, ev.objects, ev.fixtures, about, obstacle,
-                                                            toppled), source="simstate",
+                            recovery_action=recovery_action(level, category, ev.goal, ev.objects, ev.fixtures,
+                                                            about, obstacle, toppled), source="simstate",
                             raw_text=raw)

@@ -44,13 +44,14 @@ Rules:
   moves >= `displace_m` meanwhile, or a fixture that is not a reference for >=
   `fixture_contact_steps`; what the object rested on when the hold began is not a
   collision. Step: first contact.
-- part_not_operated: for >= `operate_steps` (runs apart by fewer than `merge_gap` steps
-  merged) the gripper is closed, holds nothing, and touches an operated fixture or is
-  farther than `near_m` from every object (gripping a handle or knob, pushing with a fist,
-  or closing on air where the knob should be); then it opens or stops, and goal progress
-  does not rise from that session's start until the next one (or the episode's end): a
-  drawer left half open, a knob not turned. Step: the first step after the session (the
-  let-go).
+- part_not_operated: a session of working an operated fixture, after which goal progress
+  has not risen by the start of the next session (or the episode's end): a drawer left
+  half open, a knob not turned. A session is the robot touching the fixture with the
+  gripper closed on nothing (a handle, a knob, a fist pushing) for >= `operate_steps`, runs
+  apart by fewer than `merge_gap` steps merged; or a close that touches it for fewer steps
+  than that, holds nothing, is farther than `near_m` from every object for >=
+  `operate_steps` and then opens (the fingers closed on air where the knob is). Step: the
+  first step after the session (the let-go).
 - goal_regression: goal progress falls below its running maximum and stays below for
   >= `regress_steps`. Step: the first lower step.
 """
@@ -255,20 +256,24 @@ def held_collisions(ev: Evidence, th: Thresholds) -> list[SimEvent]:
 
 def parts_not_operated(ev: Evidence, th: Thresholds) -> list[SimEvent]:
     out = []
-    closed = ev.gripper_command > 0
     free = np.array([g == "" for g in ev.grasped])
     dist = np.stack([ev.col("eef_distance", o) for o in ev.objects]) if ev.objects else np.full((1, len(ev)), np.inf)
-    no_object_near = dist.min(axis=0) > th.near_m
+    far = dist.min(axis=0) > th.near_m
     for part in operated(ev):
-        working = closed & free & (_pair_mask(ev, part, "robot") | no_object_near)
-        sessions = [r for r in _merged(working, th.merge_gap) if r[1] - r[0] >= th.operate_steps]
+        touching = _pair_mask(ev, part, "robot")
+        gripping = touching & (ev.gripper_command > 0) & free  # a handle, a knob, or a fist pushing
+        sessions = [r for r in _merged(gripping, th.merge_gap) if r[1] - r[0] >= th.operate_steps]
+        for s, e in closes(ev, th):  # closed on air where the part is (a knob missed), then let go
+            brushed = touching[s:e].sum() < th.operate_steps
+            if e < len(ev) and brushed and (free[s:e] & far[s:e]).sum() >= th.operate_steps:
+                sessions.append((s, e))
+        sessions.sort()
         for i, (s, e) in enumerate(sessions):
             until = sessions[i + 1][0] if i + 1 < len(sessions) else len(ev)
             before = ev.goal_progress[s - 1] if s > 0 else ev.goal_progress[0]
-            if ev.goal_progress[s:until].max() <= before + 1e-6:
+            if ev.goal_progress[s:max(until, s + 1)].max() <= before + 1e-6:
                 out.append(_ev(ev, e, "part_not_operated", part, "robot",
-                               detail=f"{(e - s) / ev.control_hz:.2f} s working {part} with the gripper closed, "
-                                      "goal progress unchanged"))
+                               detail=f"{(e - s) / ev.control_hz:.2f} s working {part}, goal progress unchanged"))
                 break
     return out
 

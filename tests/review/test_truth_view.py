@@ -29,7 +29,8 @@ def write_truth(run_dir, key: str, step: int) -> None:
     table = pa.Table.from_pylist([row], schema=TRUTH_SCHEMA.with_metadata(meta))
     import pyarrow.parquet as pq
 
-    write_with(run_dir / "stage1" / "episodes" / suite / task / ep / "truth.parquet", lambda p: pq.write_table(table, p))
+    path = run_dir / "stage1" / "episodes" / suite / task / ep / "truth.parquet"
+    write_with(path, lambda p: pq.write_table(table, p))
 
 
 def truths_for_queue(run_dir, engine) -> list[Item]:
