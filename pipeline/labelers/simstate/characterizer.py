@@ -1,0 +1,136 @@
+"""The `simstate` characterizer: recovery level, failure category and recovery action from
+a stage-2 Localization and the episode's simulator evidence (no model).
+
+Inputs: a `Localization` (onset step, phases, events) and the episode's `Evidence`.
+Output: `pipeline.records.Characterization` with source "simstate" (raw_text holds the
+measurements the decision used, for reviewers).
+
+What the failure did is measured between the onset state and the end of the during-failure
+phase (the scene once stable again), but at least MIN_EFFECT_STEPS past the onset, per
+object: how far it moved, its tilt, whether the robot still holds it.
+
+Level (first rule that matches):
+- L4  a non-target object (or a fixture) now obstructs: it moved >= MOVED_M or toppled during
+      the failure and ends within OBSTRUCT_M (horizontally) of a target or reference object,
+      or ends touching one;
+- L3  a target is substantially changed: toppled (tilt >= TOPPLE_DEG), moved >= FAR_M without
+      being held at the end (dropped, knocked away), or fell off the table (z < start - 0.1 m);
+- L2  limited change, objects still usable: anything moved >= MOVED_M or tilted >= TILT_DEG
+      (including a displaced non-target that obstructs nothing);
+- L1  nothing changed (e.g. a missed grasp): retrying the action suffices.
+Category from the onset event (the event at the onset step; for a VLM onset the nearest
+event within 1 s): grasp_missed / grasp_lost -> grasp_failure; object_dropped ->
+placement_failure if released within PLACE_NEAR_M of its own reference (the one its
+conjunct names) or landing on it within LAND_STEPS, else grasp_failure (a drop in transit);
+object_toppled / unintended_displacement -> object_displacement when it is the target,
+collision_or_interaction_failure for another object; goal_regression (something achieved
+undone, a drawer bumped shut) -> collision_or_interaction_failure; robot_contact_non_target
+-> environmental_obstruction for a fixture, collision_or_interaction_failure for an object;
+object_collision, part_not_operated -> collision_or_interaction_failure; no event -> other.
+Action: `pipeline.labelers.simstate.wording.recovery_action` for the object the onset event
+concerns (else the goal's first conjunct), e.g. "Pick the black bowl up again and put it on
+the plate", "Push the other black bowl aside, then grasp the black bowl and put it on the
+plate".
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+from pipeline.labelers.simstate.wording import recovery_action
+from pipeline.evidence import Evidence, owner_of
+from pipeline.records import Category, Characterization, Level, Localization, SimEvent
+
+MOVED_M, FAR_M, OBSTRUCT_M, PLACE_NEAR_M = 0.01, 0.05, 0.15, 0.10
+TILT_DEG, TOPPLE_DEG = 10.0, 45.0
+MIN_EFFECT_STEPS = 20  # measure the change at least 1 s past the onset (a topple takes that long)
+LAND_STEPS = 30  # a drop that lands on its reference this soon was released over it
+
+
+def _onset_event(loc: Localization) -> SimEvent | None:
+    at = [e for e in loc.events if e.step == loc.fail_step]
+    if at:
+        return at[0]
+    near = [e for e in loc.events if abs(e.time_s - loc.fail_time_s) <= 1.0]
+    return min(near, key=lambda e: abs(e.time_s - loc.fail_time_s)) if near else None
+
+
+def _changes(ev: Evidence, a: int, b: int) -> dict[str, dict]:
+    out = {}
+    for o in ev.objects:
+        pos = ev.col("position", o)
+        out[o] = {"moved": float(np.linalg.norm(pos[b] - pos[a])), "tilt": float(ev.col("tilt_deg", o)[b]),
+                  "tilt_gain": float(ev.col("tilt_deg", o)[b] - ev.col("tilt_deg", o)[a]),
+                  "fell_off": bool(ev.col("lift", o)[b] < -0.1), "held": ev.grasped[b] == o, "xy": pos[b, :2]}
+    return out
+
+
+def _level(ev: Evidence, ch: dict[str, dict], end: int) -> tuple[Level, str | None]:
+    focus = [o for o in ev.targets + ev.references if o in ch]
+    for o, c in ch.items():
+        if o in ev.targets or o in ev.references:
+            continue
+        disturbed = c["moved"] >= MOVED_M or c["tilt"] >= TOPPLE_DEG > c["tilt"] - c["tilt_gain"]
+        near = [f for f in focus if np.linalg.norm(c["xy"] - ch[f]["xy"]) <= OBSTRUCT_M]
+        touching = [f for f in focus if "|".join(sorted((o, f))) in ev.contacts[end]]
+        if disturbed and (near or touching):
+            return Level.L4, o
+    for o in ev.targets:
+        c = ch.get(o)
+        if c and (c["tilt"] >= TOPPLE_DEG or c["fell_off"] or (c["moved"] >= FAR_M and not c["held"])):
+            return Level.L3, None
+    if any(c["moved"] >= MOVED_M or c["tilt_gain"] >= TILT_DEG for c in ch.values()):
+        return Level.L2, None
+    return Level.L1, None
+
+
+def _references_of(ev: Evidence, obj: str | None) -> list[str]:
+    """Where the goal puts `obj` (owners of its on/in conjuncts' second argument)."""
+    known = ev.objects + ev.fixtures
+    own = [owner_of(c[2], known) for c in ev.goal if c[0].lower() in ("on", "in") and len(c) == 3 and c[1] == obj]
+    return own or list(ev.references)
+
+
+def _category(ev: Evidence, event: SimEvent | None, fixtures: list[str]) -> Category:
+    if event is None:
+        return Category.other
+    k, obj = event.kind, event.object
+    if k in ("grasp_missed", "grasp_lost"):
+        return Category.grasp_failure
+    if k == "object_dropped":
+        refs = _references_of(ev, obj)
+        pos = {o: ev.col("position", o)[event.step, :2] for o in ev.objects}
+        near = any(np.linalg.norm(pos[obj] - pos[r]) <= PLACE_NEAR_M for r in refs if r in pos)
+        after = ev.contacts[event.step:event.step + LAND_STEPS]
+        landed = any("|".join(sorted((obj, r))) in c for r in refs for c in after)
+        return Category.placement_failure if near or landed else Category.grasp_failure
+    if k in ("object_toppled", "unintended_displacement"):
+        return Category.object_displacement if obj in ev.targets else Category.collision_or_interaction_failure
+    if k == "goal_regression":
+        return Category.collision_or_interaction_failure
+    if k == "robot_contact_non_target":
+        return Category.environmental_obstruction if obj in fixtures else Category.collision_or_interaction_failure
+    if k in ("object_collision", "part_not_operated"):
+        return Category.collision_or_interaction_failure
+    return Category.other
+
+
+def characterize(loc: Localization, ev: Evidence) -> Characterization:
+    onset = min(loc.fail_step, len(ev) - 1)
+    end = min(max(loc.phases.during[1] - 1, onset + 40), len(ev) - 1)
+    ch = _changes(ev, onset, end)
+    level, obstacle = _level(ev, ch, end)
+    event = _onset_event(loc)
+    category = _category(ev, event, ev.fixtures)
+    about = event.object if event is not None and event.object else (ev.targets[0] if ev.targets else None)
+    toppled = about in ch and ch[about]["tilt"] >= TOPPLE_DEG
+    measured = {o: {k: (round(v, 3) if isinstance(v, float) else v) for k, v in c.items() if k != "xy"}
+                for o, c in ch.items()}
+    raw = json.dumps({"onset_step": onset, "end_step": end, "event": event.kind if event else None,
+                      "obstacle": obstacle, "changes": measured})
+    return Characterization(key=loc.key, recovery_level=level, failure_category=category,
+                            recovery_action=recovery_action(level, category, ev.goal, ev.objects, ev.fixtures,
+                                                            about, obstacle, toppled), source="simstate",
+                            raw_text=raw)
