@@ -39,8 +39,8 @@ import json
 
 import numpy as np
 
-from pipeline.labelers.simstate.wording import recovery_action
 from pipeline.evidence import Evidence, owner_of
+from pipeline.labelers.simstate.wording import recovery_action
 from pipeline.records import Category, Characterization, Level, Localization, SimEvent
 
 MOVED_M, FAR_M, OBSTRUCT_M, PLACE_NEAR_M = 0.01, 0.05, 0.15, 0.10
