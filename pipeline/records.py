@@ -245,7 +245,7 @@ class SimEvent(Record):
     step: int
     time_s: float
     kind: str  # grasp_missed | grasp_lost | object_dropped | object_toppled | unintended_displacement
-    #            | robot_contact_non_target | object_collision | goal_regression | ...
+    #            | robot_contact_non_target | object_collision | part_not_operated | goal_regression | ...
     object: str | None = None
     other: str | None = None
     detail: str = ""
