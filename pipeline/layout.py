@@ -329,6 +329,7 @@ class Stage3Layout:
 
     ANNOTATION_GLOB = "*/*/episode_*.json"
     ANNOTATIONS_TABLE = "annotations.parquet"
+    MODEL_VS_TRUTH = "model_vs_truth.json"  # the export's model and final records vs the generator's truth
 
     @property
     def reviewed_scenes(self) -> Path:

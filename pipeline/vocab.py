@@ -28,7 +28,7 @@ class Category(StrEnum):
 
 
 class EventKind(StrEnum):
-    """What the simstate rules saw happen (pipeline/stage2/events.py documents each rule)."""
+    """What the simstate rules saw happen (pipeline/labelers/simstate/events.py documents each rule)."""
 
     grasp_missed = "grasp_missed"
     grasp_lost = "grasp_lost"
@@ -37,6 +37,7 @@ class EventKind(StrEnum):
     unintended_displacement = "unintended_displacement"
     robot_contact_non_target = "robot_contact_non_target"
     object_collision = "object_collision"
+    part_not_operated = "part_not_operated"  # a knob or drawer worked, let go, no goal progress
     goal_regression = "goal_regression"
 
 

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import typer
 
-from pipeline.layout import RunLayout
+from pipeline.layout import RunLayout, Stage3Layout
 
 app = typer.Typer(add_completion=False, no_args_is_help=True, help="Human review queue.")
 CONFIG = typer.Option(Path("configs/smoke.yaml"), "--config", "-c", help="run config (YAML)")
@@ -114,7 +114,7 @@ def reviewers_reactivate(name: str = typer.Argument(..., help="the person's name
 def status(config: Path = CONFIG, as_json: bool = typer.Option(False, "--json", help="print JSON")) -> None:
     """Queue counts and agreement statistics; writes the confusion-matrix PNG beside them."""
     from pipeline.atomic import write_json
-    from pipeline.review import report, views
+    from pipeline.review import report, truth_view, views
     from pipeline.review.db import read_session, write_session
     from pipeline.review.server import engine_for, settings
     from pipeline.review.workflow import expire
@@ -123,8 +123,12 @@ def status(config: Path = CONFIG, as_json: bool = typer.Option(False, "--json", 
     engine = engine_for(cfg)
     with write_session(engine) as s:
         expire(s)
+    tau = settings(cfg).time_tolerance_s
     with read_session(engine) as s:
-        out = {"counts": views.counts(s), **report.summary(s, settings(cfg).time_tolerance_s)}
+        out = {"counts": views.counts(s), **report.summary(s, tau)}
+        # beside model vs reviewers: model vs the scripted generator's truth, when it wrote one
+        out["model_vs_truth"] = truth_view.compare(report.current_items(s), cfg.out, tau,
+                                                   cfg.stage1.rollout.control_hz)
     s3 = RunLayout.of(cfg).stage3
     write_json(s3.review_status, out)
     png = report.plot(out, s3.review_confusion)
@@ -142,13 +146,16 @@ def export(config: Path = CONFIG, out: Path = typer.Option(None, help="default: 
     """Write final records as JSON per episode plus annotations.parquet."""
     from pipeline.review.db import read_session
     from pipeline.review.export import export as do_export
-    from pipeline.review.server import engine_for
+    from pipeline.review.server import engine_for, settings
 
     cfg = _cfg(config)
     root = out or RunLayout.of(cfg).stage3.annotations
     with read_session(engine_for(cfg)) as s:
-        files = do_export(s, root)
+        files = do_export(s, root, run_dir=cfg.out, control_hz=cfg.stage1.rollout.control_hz,
+                          tau=settings(cfg).time_tolerance_s)
     typer.echo(f"exported {len(files)} final record(s) to {root}")
+    if (root / Stage3Layout.MODEL_VS_TRUTH).is_file():
+        typer.echo(f"model and final records vs the generator's truth: {root / Stage3Layout.MODEL_VS_TRUTH}")
 
 
 @app.command()

@@ -4,6 +4,9 @@ Inputs: the review database.
 Outputs (under `root`, default `<run>/stage3/annotations/`):
   <suite>/<task>/episode_<episode_id>.json   one `records.Annotation` each
   annotations.parquet                         the same records, flat (ANNOTATION_SCHEMA)
+  model_vs_truth.json                         when the scripted generator wrote a truth: the
+                                              model proposals and final records vs it
+                                              (`pipeline.review.truth_view`)
 Invariants: only final items are exported (never pending, conflict or excluded ones);
 per episode the newest final revision wins; every file is written atomically and
 validated against the pydantic model first; the folder mirrors the database exactly
@@ -24,6 +27,7 @@ from pipeline.arrow import arrow_schema
 from pipeline.atomic import write_json, write_text, write_with
 from pipeline.layout import Stage3Layout
 from pipeline.records import Annotation, AnnotationAdjudication, AnnotationProposal, AnnotationReview, Category, Level
+from pipeline.review import truth_view
 from pipeline.review.audit import iso
 from pipeline.review.db import FINAL, Adjudication, Item, Review, User
 from pipeline.vocab import Resolution
@@ -89,9 +93,11 @@ def final_items(s: Session) -> list[Item]:
     return [i for i in newest.values() if i.resolution != Resolution.excluded and i.final]
 
 
-def export(s: Session, root: str | Path) -> list[Path]:
+def export(s: Session, root: str | Path, run_dir: str | Path | None = None, control_hz: int = 20,
+           tau: float = 1.0) -> list[Path]:
     root = Path(root)
-    records = [annotation(s, item) for item in final_items(s)]
+    finals = final_items(s)
+    records = [annotation(s, item) for item in finals]
     written = []
     for a in records:
         path = file_for(root, a)
@@ -106,6 +112,11 @@ def export(s: Session, root: str | Path) -> list[Path]:
     import pyarrow.parquet as pq
 
     write_with(root / Stage3Layout.ANNOTATIONS_TABLE, lambda p: pq.write_table(table, p))
+    truth = truth_view.compare(finals, run_dir, tau, control_hz) if run_dir is not None else None
+    if truth is not None:
+        write_json(root / Stage3Layout.MODEL_VS_TRUTH, truth)
+    else:
+        (root / Stage3Layout.MODEL_VS_TRUTH).unlink(missing_ok=True)
     return written
 
 

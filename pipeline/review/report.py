@@ -81,6 +81,11 @@ def _model_quality(items: list[Item], tau: float) -> dict:
     return {"by_characterizer": by_char, "by_localizer": by_loc}
 
 
+def current_items(s: Session) -> list[Item]:
+    """Every item that is not a superseded revision."""
+    return list(s.scalars(select(Item).where(Item.status != SUPERSEDED).order_by(Item.id)))
+
+
 def summary(s: Session, tau: float) -> dict:
     units: dict[int, list[dict]] = defaultdict(list)
     rows = s.execute(

@@ -1,4 +1,5 @@
-"""Printing `recover review status`: queue counts, agreement, model quality (rich tables).
+"""Printing `recover review status`: queue counts, agreement, model quality, and model and
+reviewers vs the generator's truth when there is one (rich tables).
 
 Inputs: the dict from `report.summary` plus `counts`. Output: text on the console.
 """
@@ -46,3 +47,14 @@ def render(out: dict, console: Console | None = None) -> None:
     for g in mq["by_localizer"]:
         t.add_row(g["version"] + " (times)", str(g["n"]), "", "", _f(g["mean_abs_error_s"]), _f(g["within_tau"]))
     console.print(t)
+
+    truth = out.get("model_vs_truth")
+    if truth:
+        t = Table(title=f"model and reviewers vs the generator's truth (onset within ±{truth['tau_s']} s)")
+        for col in ("records", "n", "onset within τ", "onset MAE s", "level agr.", "category agr."):
+            t.add_column(col)
+        for name, label in (("model", "model proposal"), ("final", "final (reviewed)")):
+            g = truth[name]
+            t.add_row(label, str(g["n"]), _f(g["onset_within_tau"]), _f(g["onset_mae_s"]), _f(g["level_agreement"]),
+                      _f(g["category_agreement"]))
+        console.print(t)

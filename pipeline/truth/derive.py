@@ -16,8 +16,10 @@ Rules:
 - Onset: that attempt's decisive event step (its meaning per outcome is in the record's
   module docstring): the gripper closing off target (missed_grasp), the state the object
   left the closed hand (lost_grasp), the opening that released it (dropped, misplaced), the
-  first motion of the object the contact displaced (knocked), the hand letting go of a part
-  left half open / a knob not turned (half_open, not_turned).
+  first motion of the object the contact displaced (knocked, event `knock`) or the first
+  state in which a goal conjunct that held stopped holding (knocked, event `undo`: a drawer
+  bumped shut), the hand letting go of a part left half open / a knob not turned
+  (half_open, not_turned).
 - Category (the project's six, `records.Category`):
   missed_grasp, lost_grasp                  -> grasp_failure
   dropped                                   -> placement_failure if released within
@@ -26,7 +28,8 @@ Rules:
   misplaced                                 -> placement_failure
   knocked                                   -> object_displacement if the displaced object
                                                is a goal target, else
-                                               collision_or_interaction_failure
+                                               collision_or_interaction_failure (also an
+                                               undone part: the drawer is no target)
   half_open, not_turned                     -> collision_or_interaction_failure
   anything else                             -> other
   (environmental_obstruction is never expected: the generator does not know when a

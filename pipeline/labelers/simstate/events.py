@@ -2,27 +2,56 @@
 
 Input: an `Evidence` (pipeline/evidence.py). Output: `SimEvent`s sorted by step. Each rule
 reads only the evidence columns, so the same rules run on a freshly computed episode and
-on an evidence file read back from disk. Thresholds live in `Thresholds`.
+on an evidence file read back from disk. Thresholds live in `Thresholds`; they were tuned
+against the scripted generator's truth (`recover bench-localize`) on a run that is not the
+one reported in the README.
 
-Rules ("closed" = gripper command > 0; "targets" = objects the goal moves, "references" =
-what the goal puts them on/in or operates; both from the goal's conjuncts):
-- grasp_missed: the gripper closes (and stays closed >= `min_run` steps) with the grip site
-  within `near_m` of an object, and within `grasp_window` steps of the close nothing is
-  grasped. Step: the close command. Object: the nearest one.
-- grasp_lost: a grasp held >= `min_run` steps ends while the gripper is still commanded
-  closed, and the object stays ungrasped >= `min_run` steps. Step: the first ungrasped step.
-- object_dropped: a grasp ends while the object is supported by nothing but the robot, and
-  within `drop_window` steps it falls >= `drop_m` without the goal progressing. Step: the
-  open command that released it (if within `grasp_window` steps before), else the release.
-- object_toppled: an object not held tilts >= `topple_deg` from its start orientation.
-  Step: the last step its tilt was still <= `tilt_start_deg`, plus one.
-- unintended_displacement: an object that was never grasped so far moves >= `displace_m`
-  from its start. Step: the first step of that motion (displacement >= `motion_m`).
-- robot_contact_non_target: the robot touches an object or fixture that is neither a target
-  nor a reference for >= `min_run` steps, or moves it >= `motion_m` meanwhile. Step: first
+Terms: "closed" = gripper command > 0; a "close" is a run of closed steps, runs apart by
+fewer than `merge_gap` open steps merged (the command flickering while the hand still
+descends is one close); a "hold" is a run of >= `hold_steps` states with the object
+grasped (shorter runs are fingers brushing or pinching it); "targets" = objects the goal
+moves, "references" = what the goal puts them on/in or operates, "operated" = fixtures an
+open/close/turn-on/turn-off conjunct names (all from the goal's conjuncts).
+
+Rules:
+- grasp_missed: a close (>= `min_run` steps) with the grip site within `near_m` of an
+  object (the nearest target if one is that near, else the nearest object), during which no
+  hold begins and the robot touches no operated fixture (gripping a knob or pushing a
+  drawer with a fist is not a grasp). Step: the first closed step. Object: that object.
+- grasp_lost: a hold ends while the gripper is still commanded closed, and the object stays
+  ungrasped >= `min_run` steps. Step: the first ungrasped step.
+- object_dropped: a hold ends while the object is supported by nothing but the robot, and
+  within `drop_window` steps it falls >= `drop_m`, and goal progress does not rise within
+  2 * `drop_window` steps, nor before the next hold begins (a release into a basket that
+  lands there is a placement). Step: the open
+  command that released it (if within `grasp_window` steps before), else the release.
+- object_toppled: an object not held, and not held in the last `drop_window` steps (a
+  release or a slip that tips it is that event, an object tipping over inside its
+  container is no failure), tilts >= `topple_deg` from its start orientation, and was not
+  held since it began tipping. Step: the last step its tilt was still <= `tilt_start_deg`,
+  plus one.
+- unintended_displacement: an object moves >= `displace_m` from its start (a target or a
+  reference >= `own_displace_m`: a nudge on the way to a grasp that then holds, or a
+  basket nudged by what is put into it, is no failure) before it is first held; a target's
+  motion only counts before the first close near it (the closing fingers moving it are the
+  grasp). Step: the first step of that motion (displacement
+  >= `motion_m`).
+- robot_contact_non_target: the robot touches an object that is neither a target nor a
+  reference and moves it >= `displace_m` meanwhile (a touch that moves nothing is no
+  failure), or a fixture that is neither for >= `fixture_contact_steps`. Step: first
   contact.
-- object_collision: a held object touches another object or fixture (not table, not a
-  reference) for >= `min_run` steps. Step: first contact.
+- object_collision: a held object touches another object that is not a reference and that
+  moves >= `displace_m` meanwhile, or a fixture that is not a reference for >=
+  `fixture_contact_steps`; what the object rested on when the hold began is not a
+  collision. Step: first contact.
+- part_not_operated: a session of working an operated fixture, after which goal progress
+  has not risen by the start of the next session (or the episode's end): a drawer left
+  half open, a knob not turned. A session is the robot touching the fixture with the
+  gripper closed on nothing (a handle, a knob, a fist pushing) for >= `operate_steps`, runs
+  apart by fewer than `merge_gap` steps merged; or a close that touches it for fewer steps
+  than that, holds nothing, is farther than `near_m` from every object for >=
+  `operate_steps` and then opens (the fingers closed on air where the knob is). Step: the
+  first step after the session (the let-go).
 - goal_regression: goal progress falls below its running maximum and stays below for
   >= `regress_steps`. Step: the first lower step.
 """
@@ -33,21 +62,26 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.evidence import Evidence
+from pipeline.evidence import Evidence, owner_of
 from pipeline.records import EventKind, SimEvent
 
 
 @dataclass(frozen=True)
 class Thresholds:
-    near_m: float = 0.15
-    grasp_window: int = 20  # steps (1 s) for a close to produce a grasp
+    near_m: float = 0.17  # grip site to an object's body origin for a close to be a grasp on it
+    grasp_window: int = 20  # steps (1 s): an open command this soon before a drop released it
     min_run: int = 3  # steps a state must last to count (filters one-step flicker)
+    merge_gap: int = 8  # closed runs apart by fewer open steps are one close (command flicker)
+    hold_steps: int = 6  # states in hand that make a hold (fewer: brushing, a pinch that slips)
     drop_window: int = 30
     drop_m: float = 0.03
     topple_deg: float = 45.0
     tilt_start_deg: float = 10.0
-    displace_m: float = 0.03
-    motion_m: float = 0.005
+    displace_m: float = 0.02  # the truth's knock: an object pushed 2 cm
+    own_displace_m: float = 0.05  # a target (before its grasp) or a reference must move this far
+    motion_m: float = 0.003
+    fixture_contact_steps: int = 40  # 2 s pressed against a fixture the goal does not involve
+    operate_steps: int = 10  # contact with an operated fixture that is an attempt to operate it
     regress_steps: int = 5
 
 
@@ -58,7 +92,18 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1), strict=True))
 
 
-def _ev(ev: Evidence, step: int, kind: EventKind, obj: str | None = None, other: str | None = None, detail: str = ""):
+def _merged(mask: np.ndarray, gap: int) -> list[tuple[int, int]]:
+    """Runs of True, runs apart by fewer than `gap` False steps joined."""
+    out: list[list[int]] = []
+    for s, e in _runs(mask):
+        if out and s - out[-1][1] < gap:
+            out[-1][1] = e
+        else:
+            out.append([s, e])
+    return [(int(s), int(e)) for s, e in out]
+
+
+def _ev(ev: Evidence, step: int, kind: str, obj: str | None = None, other: str | None = None, detail: str = ""):
     return SimEvent(step=int(step), time_s=float(step / ev.control_hz), kind=kind, object=obj, other=other,
                     detail=detail)
 
@@ -68,18 +113,40 @@ def _pair_mask(ev: Evidence, a: str, b: str) -> np.ndarray:
     return np.array([key in c for c in ev.contacts])
 
 
+def operated(ev: Evidence) -> list[str]:
+    """Fixtures (or objects) an open / close / turn-on / turn-off conjunct operates."""
+    known = ev.objects + ev.fixtures
+    return list(dict.fromkeys(owner_of(a, known) for p, *args in ev.goal
+                              if p.lower() in ("open", "close", "turnon", "turnoff") for a in args))
+
+
+def holds(ev: Evidence, th: Thresholds, obj: str | None = None) -> list[tuple[int, int, str]]:
+    """(start, end, object) of every hold (of `obj`, or of any object)."""
+    out = []
+    for o in ([obj] if obj else ev.objects):
+        out += [(s, e, o) for s, e in _runs(np.array([g == o for g in ev.grasped])) if e - s >= th.hold_steps]
+    return sorted(out)
+
+
+def closes(ev: Evidence, th: Thresholds) -> list[tuple[int, int]]:
+    return [(s, e) for s, e in _merged(ev.gripper_command > 0, th.merge_gap) if e - s >= th.min_run]
+
+
 def grasp_missed(ev: Evidence, th: Thresholds) -> list[SimEvent]:
     out = []
-    closed = ev.gripper_command > 0
-    held = np.array([g != "" for g in ev.grasped])
-    for s, e in _runs(closed):
-        if e - s < th.min_run:
-            continue
+    starts = [s for s, _, _ in holds(ev, th)]
+    parts = operated(ev)
+    touching_part = np.zeros(len(ev), bool)
+    for p in parts:
+        touching_part |= _pair_mask(ev, p, "robot")
+    for s, e in closes(ev, th):
         dist = {o: float(ev.col("eef_distance", o)[s]) for o in ev.objects}
-        near = min(dist, key=dist.get)
-        if dist[near] > th.near_m or held[s : min(e, s + th.grasp_window)].any():
+        near_targets = [o for o in ev.targets if o in dist and dist[o] <= th.near_m]
+        near = min(near_targets or dist, key=dist.get) if dist else None
+        if near is None or dist[near] > th.near_m or any(s <= h < e for h in starts) or touching_part[s:e].any():
             continue
-        out.append(_ev(ev, s, EventKind.grasp_missed, near, detail=f"closed {dist[near]:.3f} m from {near}, nothing grasped"))
+        out.append(_ev(ev, s, "grasp_missed", near, detail=f"closed {dist[near]:.3f} m from {near}'s origin, "
+                                                            "nothing held"))
     return out
 
 
@@ -87,25 +154,26 @@ def grasp_lost_and_dropped(ev: Evidence, th: Thresholds) -> list[SimEvent]:
     out = []
     closed = ev.gripper_command > 0
     n = len(ev)
-    for obj in ev.objects:
+    all_holds = holds(ev, th)
+    for s, e, obj in all_holds:
+        if e >= n:
+            continue
         held = np.array([g == obj for g in ev.grasped])
-        for s, e in _runs(held):
-            if e - s < th.min_run or e >= n:
-                continue
-            if held[e : e + th.min_run].any():
-                continue  # flicker, the grasp resumes
-            lift = ev.col("lift", obj)
-            window = slice(e, min(n, e + th.drop_window))
-            fell = float(lift[e - 1] - lift[window].min())
-            supported = any(c.startswith(f"{obj}|") or c.endswith(f"|{obj}") for c in ev.contacts[e - 1]
-                            if "robot" not in c.split("|"))
-            progressed = ev.goal_progress[window].max() > ev.goal_progress[e - 1]
-            if fell >= th.drop_m and not supported and not progressed:
-                opens = [t for t in range(max(s, e - th.grasp_window), e) if not closed[t] and (t == 0 or closed[t - 1])]
-                out.append(_ev(ev, opens[-1] if opens else e, EventKind.object_dropped, obj,
-                               detail=f"released unsupported, fell {fell:.3f} m"))
-            elif closed[e - 1] and closed[e]:
-                out.append(_ev(ev, e, EventKind.grasp_lost, obj, detail="slipped out of the closed gripper"))
+        if held[e : e + th.min_run].any():
+            continue  # flicker, the grasp resumes
+        lift = ev.col("lift", obj)
+        window = slice(e, min(n, e + th.drop_window))
+        fell = float(lift[e - 1] - lift[window].min())
+        supported = any(c.startswith(f"{obj}|") or c.endswith(f"|{obj}") for c in ev.contacts[e - 1]
+                        if "robot" not in c.split("|"))
+        nxt = next((h for h, _, _ in all_holds if h > e), n)
+        progressed = ev.goal_progress[e:max(e + 1, min(nxt, e + 2 * th.drop_window))].max() > ev.goal_progress[e - 1]
+        if fell >= th.drop_m and not supported and not progressed:
+            opens = [t for t in range(max(s, e - th.grasp_window), e) if not closed[t] and (t == 0 or closed[t - 1])]
+            out.append(_ev(ev, opens[-1] if opens else e, "object_dropped", obj,
+                           detail=f"released unsupported, fell {fell:.3f} m"))
+        elif closed[e - 1] and closed[e]:
+            out.append(_ev(ev, e, "grasp_lost", obj, detail="slipped out of the closed gripper"))
     return out
 
 
@@ -113,22 +181,32 @@ def toppled(ev: Evidence, th: Thresholds) -> list[SimEvent]:
     out = []
     for obj in ev.objects:
         tilt = ev.col("tilt_deg", obj)
-        over = np.flatnonzero((tilt >= th.topple_deg) & np.array([g != obj for g in ev.grasped]))
+        held = np.array([g == obj for g in ev.grasped])
+        recently = np.convolve(held.astype(int), np.ones(th.drop_window + 1, int))[: len(held)] > 0
+        over = np.flatnonzero((tilt >= th.topple_deg) & ~recently)
         if len(over):
             k = int(over[0])
             calm = np.flatnonzero(tilt[:k] <= th.tilt_start_deg)
             step = int(calm[-1]) + 1 if len(calm) else 0
-            out.append(_ev(ev, step, EventKind.object_toppled, obj, detail=f"tilted {tilt[k]:.0f} deg"))
+            if held[step:k].any():
+                continue  # it began tipping in the hand: the release or slip is the event
+            out.append(_ev(ev, step, "object_toppled", obj, detail=f"tilted {tilt[k]:.0f} deg"))
     return out
 
 
 def displaced(ev: Evidence, th: Thresholds) -> list[SimEvent]:
     out = []
+    first_close = {}
+    for s, _ in closes(ev, th):
+        for o in ev.targets:
+            if o in ev.objects and o not in first_close and ev.col("eef_distance", o)[s] <= th.near_m:
+                first_close[o] = s
     for obj in ev.objects:
         held = np.flatnonzero([g == obj for g in ev.grasped])
-        first_held = int(held[0]) if len(held) else len(ev)
-        disp = ev.col("displacement", obj)[:first_held]
-        far = np.flatnonzero(disp >= th.displace_m)
+        stop = min(int(held[0]) if len(held) else len(ev), first_close.get(obj, len(ev)))
+        disp = ev.col("displacement", obj)[:stop]
+        limit = th.own_displace_m if obj in ev.references or obj in ev.targets else th.displace_m
+        far = np.flatnonzero(disp >= limit)
         if len(far):
             k = int(far[0])
             still = np.flatnonzero(disp[:k] < th.motion_m)
@@ -137,17 +215,23 @@ def displaced(ev: Evidence, th: Thresholds) -> list[SimEvent]:
     return out
 
 
+def _moved_during(ev: Evidence, thing: str, s: int, e: int) -> float:
+    if thing not in ev.objects:
+        return 0.0
+    pos = ev.col("position", thing)
+    return float(np.linalg.norm(pos[s:min(len(ev), e + 1)] - pos[s], axis=1).max())
+
+
 def robot_contacts(ev: Evidence, th: Thresholds) -> list[SimEvent]:
     out = []
     relevant = set(ev.targets) | set(ev.references)
     for thing in ev.objects + ev.fixtures:
         if thing in relevant:
             continue
-        disp = ev.col("displacement", thing) if thing in ev.objects else np.zeros(len(ev))
         for s, e in _runs(_pair_mask(ev, thing, "robot")):
-            moved = float(disp[s:e].max() - disp[s])
-            if e - s >= th.min_run or moved >= th.motion_m:
-                out.append(_ev(ev, s, EventKind.robot_contact_non_target, thing, "robot",
+            moved = _moved_during(ev, thing, s, e)
+            if moved >= th.displace_m or (thing not in ev.objects and e - s >= th.fixture_contact_steps):
+                out.append(_ev(ev, s, "robot_contact_non_target", thing, "robot",
                                detail=f"{(e - s) / ev.control_hz:.2f} s of contact, moved it {moved:.3f} m"))
                 break
     return out
@@ -155,14 +239,42 @@ def robot_contacts(ev: Evidence, th: Thresholds) -> list[SimEvent]:
 
 def held_collisions(ev: Evidence, th: Thresholds) -> list[SimEvent]:
     out = []
-    for thing in ev.objects + ev.fixtures:
-        if thing in ev.references:
-            continue
-        for obj in set(g for g in ev.grasped if g and g != thing):
-            mask = _pair_mask(ev, obj, thing) & np.array([g == obj for g in ev.grasped])
-            runs = [r for r in _runs(mask) if r[1] - r[0] >= th.min_run]
-            if runs:
-                out.append(_ev(ev, runs[0][0], EventKind.object_collision, obj, thing, detail=f"held {obj} hit {thing}"))
+    for hs, he, obj in holds(ev, th):
+        for thing in ev.objects + ev.fixtures:
+            if thing in ev.references or thing == obj or "|".join(sorted((obj, thing))) in ev.contacts[hs]:
+                continue  # a reference, or what it rested on when the hold began
+            mask = _pair_mask(ev, obj, thing)[hs:he]
+            for s, e in _runs(mask):
+                s, e = s + hs, e + hs
+                moved = _moved_during(ev, thing, s, e)
+                if moved >= th.displace_m or (thing not in ev.objects and e - s >= th.fixture_contact_steps):
+                    out.append(_ev(ev, s, "object_collision", obj, thing,
+                                   detail=f"held {obj} hit {thing} (moved it {moved:.3f} m)"))
+                    break
+    return out
+
+
+def parts_not_operated(ev: Evidence, th: Thresholds) -> list[SimEvent]:
+    out = []
+    free = np.array([g == "" for g in ev.grasped])
+    dist = np.stack([ev.col("eef_distance", o) for o in ev.objects]) if ev.objects else np.full((1, len(ev)), np.inf)
+    far = dist.min(axis=0) > th.near_m
+    for part in operated(ev):
+        touching = _pair_mask(ev, part, "robot")
+        gripping = touching & (ev.gripper_command > 0) & free  # a handle, a knob, or a fist pushing
+        sessions = [r for r in _merged(gripping, th.merge_gap) if r[1] - r[0] >= th.operate_steps]
+        for s, e in closes(ev, th):  # closed on air where the part is (a knob missed), then let go
+            brushed = touching[s:e].sum() < th.operate_steps
+            if e < len(ev) and brushed and (free[s:e] & far[s:e]).sum() >= th.operate_steps:
+                sessions.append((s, e))
+        sessions.sort()
+        for i, (s, e) in enumerate(sessions):
+            until = sessions[i + 1][0] if i + 1 < len(sessions) else len(ev)
+            before = ev.goal_progress[s - 1] if s > 0 else ev.goal_progress[0]
+            if ev.goal_progress[s:max(until, s + 1)].max() <= before + 1e-6:
+                out.append(_ev(ev, e, "part_not_operated", part, "robot",
+                               detail=f"{(e - s) / ev.control_hz:.2f} s working {part}, goal progress unchanged"))
+                break
     return out
 
 
@@ -174,7 +286,8 @@ def goal_regression(ev: Evidence, th: Thresholds) -> list[SimEvent]:
     return []
 
 
-RULES = (grasp_missed, grasp_lost_and_dropped, toppled, displaced, robot_contacts, held_collisions, goal_regression)
+RULES = (grasp_missed, grasp_lost_and_dropped, toppled, displaced, robot_contacts, held_collisions,
+         parts_not_operated, goal_regression)
 
 
 def detect_events(ev: Evidence, th: Thresholds | None = None) -> list[SimEvent]:

@@ -9,7 +9,8 @@ achieved (grasp_missed), grasp lost while still closed (grasp_lost), object rele
 unsupported and falling (object_dropped), object toppled (object_toppled), an object moved
 without having been grasped (unintended_displacement), robot contact with an object or
 fixture the goal does not involve (robot_contact_non_target), a held object hitting
-something (object_collision), goal progress falling back (goal_regression).
+something (object_collision), a drawer or knob worked and let go without goal progress
+(part_not_operated), goal progress falling back (goal_regression).
 
 Onset = the earliest of these events: each one is task-relevant by construction (it
 changes the target, the scene the task needs, or the progress toward the goal). Ties are
@@ -31,14 +32,8 @@ from pipeline.labelers.simstate.events import Thresholds, detect_events
 from pipeline.records import EventKind, SimEvent
 
 ONSET_PRIORITY = (
-    EventKind.grasp_missed,
-    EventKind.grasp_lost,
-    EventKind.object_dropped,
-    EventKind.object_toppled,
-    EventKind.unintended_displacement,
-    EventKind.robot_contact_non_target,
-    EventKind.object_collision,
-    EventKind.goal_regression,
+    "grasp_missed", "grasp_lost", "object_dropped", "object_toppled", "unintended_displacement",
+    "robot_contact_non_target", "object_collision", "part_not_operated", "goal_regression",
 )
 IDLE_TOL_M = 0.002
 

@@ -23,10 +23,16 @@ runs, or a pinch lost before the lift, are fingers brushing it.
 - misplaced: released and set down (fell < DROP_M), but the conjunct does not hold;
   event `release`, the open command (the release at the wrong place).
 - knocked: an object was displaced >= KNOCK_M (or tipped >= TOPPLE_DEG) by contact
-  before the attempt's own failure event (the target only before the fingers began
-  closing on it), or, in an attempt that achieved its subgoal, another goal object
-  >= KNOCK_M or any object >= FAR_KNOCK_M; event `knock`, the first state it had moved
-  >= MOTION_M (or tilted >= TILT_START_DEG).
+  before the attempt's own failure event, or, in an attempt that achieved its subgoal,
+  another goal object >= KNOCK_M or any object >= FAR_KNOCK_M; event `knock`, the first
+  state it had moved >= MOTION_M (or tilted >= TILT_START_DEG). The attempt's own target
+  (only before the fingers began closing on it) and reference count from FAR_KNOCK_M: a
+  nudge on the way to a grasp or a placement the expert then makes is not its mistake. An
+  object whose goal conjunct holds at the attempt's end is where it should be (a bowl in a
+  drawer moves with the drawer): no knock. A goal conjunct that held when the attempt
+  began and no longer holds at its end (other than the attempt's own; a drawer bumped
+  shut) is knocked too; event `undo`, the first state of the run in which it stopped
+  holding, object the conjunct's first argument.
 - half_open / not_turned: a drawer/door/knob attempt ended without its conjunct; event
   `let_go`, the step the hand stopped operating the part.
 - timeout: the episode ended inside the attempt before anything above happened; event
@@ -102,7 +108,7 @@ class TruthRow(BaseModel):
     speed_factor: F32
     subgoal_achieved: bool
     outcome: str  # one of OUTCOMES
-    event: str | None  # close | slip | release | knock | let_go | timeout
+    event: str | None  # close | slip | release | knock | undo | let_go | timeout
     event_step: int | None
     event_object: str | None
     grip_error_m: F32 | None  # grip site to the target's body at the close
@@ -174,6 +180,8 @@ class TruthLog:
         self.pos: list[np.ndarray] = []  # (n_objects, 3) in state row t
         self.quat: list[np.ndarray] = []
         self.eef: list[np.ndarray] = []  # grip site in state row t
+        self.goal = [tuple(c) for c in env.goal]
+        self.sat: list[tuple[bool, ...]] = []  # which goal conjuncts hold in state row t
         self._start()
 
     @_safe
@@ -187,6 +195,8 @@ class TruthLog:
         self.quat.append(np.array([poses[o][1] for o in self.objects]).reshape(-1, 4))
         self.held.append(self._in_hand())
         self.eef.append(np.array(self.scene.eef()))
+        ok = dict(self.scene.env.goal_conjuncts())
+        self.sat.append(tuple(bool(ok.get(c, False)) for c in self.goal))
 
     def _in_hand(self) -> str:
         """The object between the fingers: touched by both, or by one while lifted >=
@@ -312,7 +322,8 @@ class TruthLog:
         return None
 
     def _knocks(self, a: Attempt, end: int) -> list[dict]:
-        """Objects that moved >= KNOCK_M in the attempt (the target only before the close)."""
+        """Objects that moved >= KNOCK_M in the attempt (the target only before the close;
+        the target and reference from FAR_KNOCK_M), and goal conjuncts it undid."""
         out = []
         p0 = self.pos[a.start]
         # the target counts until the fingers start closing on it (or hold it): what the
@@ -320,15 +331,35 @@ class TruthLog:
         touched = [t for t in range(a.start, end + 1) if self.held[t] == a.target]
         close = self._first_cmd(a, self._first("descend", a), closing=True) if a.skill == "pick_place" else None
         first_held = min(x for x in (end, close, touched[0] if touched else None) if x is not None)
+        in_place = {c[1] for c, ok in zip(self.goal, self.sat[end]) if ok and len(c) == 3}
+        own = {a.target, self._owner(a.reference)}
         for i, o in enumerate(self.objects):
+            if o in in_place:
+                continue
             stop = first_held if o == a.target else end
             rows = range(a.start, stop + 1)
             track = np.array([np.linalg.norm(self.pos[t][i] - p0[i]) for t in rows])
             tilt = np.array([_tilt(self.quat[a.start][i], self.quat[t][i]) for t in rows])
-            if len(track) and (track.max() >= KNOCK_M or tilt.max() >= TOPPLE_DEG):
+            limit = FAR_KNOCK_M if o in own else KNOCK_M
+            if len(track) and (track.max() >= limit or tilt.max() >= TOPPLE_DEG):
                 moving = np.flatnonzero((track >= MOTION_M) | (tilt >= TILT_START_DEG))
                 out.append({"object": o, "moved_m": float(track.max()), "step": int(moving[0]) + a.start})
+        for j, c in enumerate(self.goal):
+            if c == tuple(a.conjunct) or not self.sat[a.start][j] or self.sat[end][j]:
+                continue
+            off = end
+            while off > a.start and not self.sat[off - 1][j]:
+                off -= 1
+            out.append({"object": self._owner(c[1]), "moved_m": 0.0, "step": off, "undo": True})
         return out
+
+    def _owner(self, name: str | None) -> str | None:
+        """The object or fixture a region belongs to ('plate_1_contain_region' -> 'plate_1')."""
+        if name is None or name in self.objects:
+            return name
+        known = self.objects + list(self.scene.env.fixture_names)
+        hits = [k for k in known if name == k or name.startswith(k + "_")]
+        return max(hits, key=len) if hits else name
 
     def _changes(self, a_row: int, b_row: int) -> list[dict]:
         out = []
@@ -369,11 +400,11 @@ class TruthLog:
             knocks = self._knocks(a, end)
             counted = [k for k in knocks if step is None or k["step"] < step]
             if achieved:  # a subgoal reached, but did it disturb the scene?
-                counted = [k for k in knocks if k["moved_m"] >= FAR_KNOCK_M or
+                counted = [k for k in knocks if k.get("undo") or k["moved_m"] >= FAR_KNOCK_M or
                            (k["object"] in self.goal_objects and k["object"] not in (a.target, a.reference))]
             if counted and a.outcome != "timeout":
                 k = min(counted, key=lambda d: d["step"])
-                a.outcome, kind, step, obj = "knocked", "knock", k["step"], k["object"]
+                a.outcome, kind, step, obj = "knocked", "undo" if k.get("undo") else "knock", k["step"], k["object"]
             step = None if step is None else int(min(max(step, a.start), last))
             grip_err = rel = None
             if kind == "close" and step is not None and a.target in idx:
@@ -382,6 +413,7 @@ class TruthLog:
                 rel = float(np.linalg.norm(self.pos[step][idx[a.target]][:2] - a.reference_xy))
             n = a.noise
             g = n.get("grasp_offset")
+            knocks = [{x: v for x, v in k.items() if x != "undo"} for k in knocks]
             out.append({
                 "attempt": a.index, "skill": a.skill, "conjunct": " ".join(a.conjunct), "target": a.target,
                 "reference": a.reference, "start_step": a.start, "end_step": end,

@@ -8,6 +8,7 @@ from pipeline.labelers.simstate.events import (
     goal_regression,
     grasp_lost_and_dropped,
     grasp_missed,
+    parts_not_operated,
     robot_contacts,
     toppled,
 )
@@ -90,8 +91,54 @@ def test_robot_touching_an_object_the_goal_involves_is_not_a_non_target_contact(
     assert robot_contacts(ev, TH) == []
     for t in range(30, 40):
         ev.contacts[t] = ["cup_1|robot"]
+    assert robot_contacts(ev, TH) == []  # a touch that moves nothing is no failure
+    ev.per_object["position"]["cup_1"][35:, 0] = 0.05
     [e] = robot_contacts(ev, TH)
     assert (e.object, e.step) == ("cup_1", 30)
+
+
+def test_a_gripper_command_flickering_during_the_descent_then_a_grasp_is_no_miss():
+    ev = make_evidence()
+    ev.per_object["eef_distance"]["bowl_1"][:] = 0.05
+    for s in (10, 17, 24):  # closed 3 steps, open 4, ... then the real close
+        ev.gripper_command[s:s + 3] = 1.0
+    ev.gripper_command[31:] = 1.0
+    ev.grasped[40:] = ["bowl_1"] * 20
+    assert grasp_missed(ev, TH) == []
+
+
+def test_a_pinch_that_slips_out_while_closing_is_a_missed_grasp():
+    ev = make_evidence()
+    ev.per_object["eef_distance"]["bowl_1"][:] = 0.05
+    ev.gripper_command[20:45] = 1.0
+    ev.grasped[26:29] = ["bowl_1"] * 3  # three states between the fingers: brushing, not a hold
+    [e] = grasp_missed(ev, TH)
+    assert (e.step, e.object) == (20, "bowl_1")
+
+
+def test_a_close_prefers_the_target_when_another_object_is_nearer():
+    ev = make_evidence()
+    ev.gripper_command[20:40] = 1.0
+    ev.per_object["eef_distance"]["bowl_1"][:] = 0.12
+    ev.per_object["eef_distance"]["cup_1"][:] = 0.05
+    [e] = grasp_missed(ev, TH)
+    assert e.object == "bowl_1"
+
+
+def test_a_knob_gripped_and_let_go_without_progress_is_a_part_not_operated():
+    ev = make_evidence(goal=(("turnon", "stove_1"),), fixtures=("stove_1",))
+    ev.gripper_command[20:40] = 1.0  # closed on the knob, far from every object
+    [e] = parts_not_operated(ev, TH)
+    assert (e.kind, e.step, e.object) == ("part_not_operated", 40, "stove_1")
+    ev.goal_progress[35:] = 1.0
+    assert parts_not_operated(ev, TH) == []
+
+
+def test_an_object_tipping_over_right_after_it_was_let_go_is_not_a_topple():
+    ev = make_evidence()
+    ev.grasped[10:30] = ["cup_1"] * 20
+    ev.per_object["tilt_deg"]["cup_1"][35:] = 60.0
+    assert toppled(ev, TH) == []
 
 
 def test_events_come_back_sorted_by_step():
@@ -100,4 +147,13 @@ def test_events_come_back_sorted_by_step():
     ev.per_object["eef_distance"]["bowl_1"][:] = 0.05
     for t in range(5, 12):
         ev.contacts[t] = ["cup_1|robot"]
+    ev.per_object["position"]["cup_1"][8:, 1] = 0.04
     assert [e.step for e in detect_events(ev)] == [5, 40]
+
+
+def test_an_object_that_began_tipping_in_the_hand_is_no_topple():
+    ev = make_evidence()
+    ev.grasped[10:20] = ["cup_1"] * 10
+    ev.per_object["tilt_deg"]["cup_1"][15:] = 20.0  # tilted while held
+    ev.per_object["tilt_deg"]["cup_1"][55:] = 60.0  # lies on its side long after the release
+    assert toppled(ev, TH) == []
