@@ -25,7 +25,7 @@ from pipeline.eval.plan import default_scenes_dir
 from pipeline.eval.records import EvalEpisode, read_episodes, write_episodes
 from pipeline.eval.scenes import find_scenes
 from pipeline.eval.stage import EvalStage
-from pipeline.layout import RunLayout
+from pipeline.layout import EvalLayout, RunLayout
 
 WORKER_ENV = {"MUJOCO_GL": "egl", "PYOPENGL_PLATFORM": "egl"}
 

@@ -27,6 +27,7 @@ import pyarrow.parquet as pq
 
 from pipeline.atomic import write_with
 from pipeline.config import Config, PolicyConfig
+from pipeline.layout import EpisodeFiles, Stage1Layout
 from pipeline.policies.base import Policy
 from pipeline.records import EpisodeRecord
 from pipeline.rollout import run_episode
