@@ -261,7 +261,8 @@ _WRITE_LOCKS: dict[tuple[int, str], _WriterLock] = {}
 _WRITE_LOCKS_GUARD = threading.Lock()
 
 
-def _writer_lock(engine: Engine) -> _WriterLock | None:
+def writer_lock(engine: Engine) -> _WriterLock | None:
+    """The lock every writer of this engine's SQLite file takes (None for other databases)."""
     if engine.dialect.name != "sqlite":
         return None
     with _WRITE_LOCKS_GUARD:
@@ -278,7 +279,7 @@ def _writer_lock(engine: Engine) -> _WriterLock | None:
 def write_session(engine: Engine) -> Iterator[Session]:
     """One write transaction (BEGIN IMMEDIATE): committed on success, rolled back on any
     exception; on SQLite taken under the file's writer lock (`_WriterLock`)."""
-    lock = _writer_lock(engine)
+    lock = writer_lock(engine)
     if lock is not None:
         lock.__enter__()
     try:
