@@ -119,7 +119,8 @@ def _load(engine: Engine, item_id: int) -> ItemInfo:
                         proposal=item.proposal, context=item.context or {}, base_json=dumps(views._base(item))[:-1])
 
 
-def _info(engine: Engine, item_id: int, stamp) -> ItemInfo:
+def info_for(engine: Engine, item_id: int, stamp) -> ItemInfo:
+    """The cached ItemInfo if it matches `stamp` (key, revision, created_at just read), else reloaded."""
     cache = _cache(engine)
     info = cache.get(item_id, stamp)
     if info is None:
@@ -134,7 +135,7 @@ def item_info(engine: Engine, item_id: int) -> ItemInfo:
         stamp = cur.first(STAMP, iid=item_id)
     if stamp is None:
         raise NotFound(f"no item {item_id}")
-    return _info(engine, item_id, stamp)
+    return info_for(engine, item_id, stamp)
 
 
 def reviewer_view_json(engine: Engine, item_id: int, user: User) -> bytes:
@@ -143,7 +144,7 @@ def reviewer_view_json(engine: Engine, item_id: int, user: User) -> bytes:
         row = cur.first(MINE, iid=item_id, uid=user.id)
     if row is None:
         raise NotFound(f"no item {item_id}")
-    info = _info(engine, item_id, (row.key, row.revision, row.created_at))
+    info = info_for(engine, item_id, (row.key, row.revision, row.created_at))
     mine = None if row.review_id is None else {
         "decision": row.decision, "values": row.values, "edited": row.edited, "reason": row.flag_reason,
         "version": row.version, "at": iso(row.updated_at),
