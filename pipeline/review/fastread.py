@@ -23,7 +23,7 @@ from sqlalchemy.engine import Engine
 
 from pipeline.review import views
 from pipeline.review.audit import iso
-from pipeline.review.db import COLLECTING, Item, Lease, Review, User, WebSession, now, read_session
+from pipeline.review.db import COLLECTING, Item, Lease, Review, User, WebSession, now
 from pipeline.review.errors import NotFound
 from pipeline.review.rawsql import Stmt, param, reading
 
@@ -33,6 +33,9 @@ _USER_COLS = (U.c.id, U.c.name, U.c.role, U.c.token_hash, U.c.active, U.c.create
 BY_TOKEN = Stmt(select(*_USER_COLS).where(U.c.token_hash == param("h")))
 BY_SESSION = Stmt(select(S.c.csrf, S.c.expires_at, *_USER_COLS)
                   .select_from(S.outerjoin(U, U.c.id == S.c.user_id)).where(S.c.id_hash == param("h")))
+ITEM = Stmt(select(I.c.id, I.c.key, I.c.revision, I.c.created_at, I.c.suite, I.c.task, I.c.episode_id, I.c.instruction,
+                   I.c.quarantined, I.c.quarantine_reason, I.c.quarantine_detail, I.c.proposal, I.c.context)
+             .where(I.c.id == param("iid")))
 _STAMP = (I.c.key, I.c.revision, I.c.created_at)
 STAMP = Stmt(select(*_STAMP).where(I.c.id == param("iid")))
 # the reviewer's view of an item in one statement (one snapshot): the item's state, the
@@ -46,10 +49,21 @@ MINE = Stmt(
 )
 
 
-def user_from(row) -> User:
-    """A detached User (as the ORM's sessions hand out) from a row of `_USER_COLS`."""
-    return User(id=row.id, name=row.name, role=row.role, token_hash=row.token_hash, active=row.active,
-                created_at=row.created_at)
+@dataclass(frozen=True, slots=True)
+class Actor:
+    """The acting user: the attributes of a `User` row, without the ORM's instance state
+    (building an ORM instance per request cost more than the query that found it)."""
+
+    id: int
+    name: str
+    role: str
+    token_hash: str
+    active: bool
+    created_at: float
+
+
+def user_from(row) -> Actor:
+    return Actor(row.id, row.name, row.role, row.token_hash, bool(row.active), row.created_at)
 
 
 @dataclass(frozen=True)
@@ -111,12 +125,12 @@ def _cache(engine: Engine) -> _Items:
 
 
 def _load(engine: Engine, item_id: int) -> ItemInfo:
-    with read_session(engine) as s:
-        item = s.get(Item, item_id)
-        if item is None:
-            raise NotFound(f"no item {item_id}")
-        return ItemInfo(id=item.id, key=item.key, revision=item.revision, created_at=item.created_at,
-                        proposal=item.proposal, context=item.context or {}, base_json=dumps(views._base(item))[:-1])
+    with reading(engine) as cur:
+        item = cur.first(ITEM, iid=item_id)  # has the attributes views._base reads
+    if item is None:
+        raise NotFound(f"no item {item_id}")
+    return ItemInfo(id=item.id, key=item.key, revision=item.revision, created_at=item.created_at,
+                    proposal=item.proposal, context=item.context or {}, base_json=dumps(views._base(item))[:-1])
 
 
 def info_for(engine: Engine, item_id: int, stamp) -> ItemInfo:
@@ -138,7 +152,7 @@ def item_info(engine: Engine, item_id: int) -> ItemInfo:
     return info_for(engine, item_id, stamp)
 
 
-def reviewer_view_json(engine: Engine, item_id: int, user: User) -> bytes:
+def reviewer_view_json(engine: Engine, item_id: int, user: User | Actor) -> bytes:
     """`views.reviewer_view` of the item for `user`, encoded."""
     with reading(engine) as cur:
         row = cur.first(MINE, iid=item_id, uid=user.id)
