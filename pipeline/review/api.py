@@ -16,7 +16,8 @@ through the cookie need the CSRF header; errors are `{"detail", "field"?, "curre
 a request body that fails the schema is a 422 whose `field` names the bad field, and no
 error repeats a secret (a token field, a whole body, a long value); sign-in takes JSON only
 (415 otherwise, before the body is read). Decisions and queue/next write through
-`fastwrite` (short under the SQLite writer lock).
+`fastwrite` (short under the SQLite writer lock); the plain case of the five requests of
+every reviewed item is answered by `fastlane` before FastAPI's routing (same answers).
 """
 
 from __future__ import annotations
@@ -36,7 +37,8 @@ from sqlalchemy import select
 from sqlalchemy.engine import Engine
 
 from pipeline.records import Category, Level
-from pipeline.review import adjudication, audit, auth, fastread, fastwrite, media, views, workflow
+from pipeline.review import adjudication, audit, auth, fastlane, fastread, fastwrite, media, views, workflow
+from pipeline.review.fastlane import FastLane
 from pipeline.review.db import COLLECTING, Item, Review, read_session, write_session
 from pipeline.review.errors import Forbidden, NotFound, ReviewError
 from pipeline.review.workflow import QueueSettings
@@ -138,6 +140,46 @@ class SecurityHeaders:
         await self.app(scope, receive, send_with_headers)
 
 
+TABLE_CACHE = {"Cache-Control": "private, max-age=300"}
+
+
+class Handlers:
+    """The answers (JSON bytes) to the five requests of every reviewed item, for the FastAPI
+    routes and for `FastLane`. Reads run in the event loop: a few prebuilt indexed reads
+    (fastread) and cached tables cost less than the hop to a thread and back; the two writes
+    run in threads of their own (they may wait for the writer lock)."""
+
+    decision_model = DecisionIn
+
+    def __init__(self, run_dir: Path, engine: Engine, settings: QueueSettings, writers):
+        self.run_dir, self.engine, self.settings, self.writers = run_dir, engine, settings, writers
+
+    async def next_item(self, p: auth.Principal) -> bytes:
+        item = await anyio.to_thread.run_sync(fastwrite.next_item, self.engine, p.user, self.settings,
+                                              limiter=self.writers())
+        return fastlane.dumps({"item": item})
+
+    def item(self, item_id: int, p: auth.Principal) -> bytes:
+        return fastread.reviewer_view_json(self.engine, item_id, p.user)
+
+    async def table(self, item_id: int, kind: str) -> bytes:
+        ctx = fastread.item_info(self.engine, item_id).context
+        path = media.safe_path(self.run_dir, ctx.get(kind) or "")
+        if path is None:
+            raise NotFound(f"item {item_id} has no {kind} table")
+        body = media.cached_table_json(kind, path)
+        if body is None:  # first read of this file: parquet, in a thread
+            body = await run_in_threadpool(media.table_json, kind, path)
+        return body
+
+    async def review(self, item_id: int, body: DecisionIn, p: auth.Principal) -> bytes:
+        payload = {**body.model_dump(mode="json", exclude={"fields"}), "fields": _edits(body.fields)}
+        out = await anyio.to_thread.run_sync(fastwrite.decide, self.engine, p.user, item_id, payload, self.settings,
+                                             limiter=self.writers())
+        return fastlane.dumps(out)
+
+
+
 def create_app(run_dir: str | Path, engine: Engine, settings: QueueSettings, ui_dir: Path = UI_DIR,
                docs: bool = False) -> FastAPI:
     run_dir = Path(run_dir).resolve()
@@ -165,7 +207,9 @@ def create_app(run_dir: str | Path, engine: Engine, settings: QueueSettings, ui_
     app.add_exception_handler(RequestValidationError, _validation_error)
     app.add_exception_handler(ReviewError, lambda _r, e: JSONResponse(status_code=e.status, content=e.body()))
 
-    app.add_middleware(SecurityHeaders)
+    h = Handlers(run_dir, engine, settings, writers)
+    app.add_middleware(FastLane, handlers=h)
+    app.add_middleware(SecurityHeaders)  # added last: outside FastLane, its answers get the headers too
 
     async def who(request: Request) -> auth.Principal:
         # in the event loop, not a worker thread: a sub-millisecond indexed read (WAL readers
@@ -237,10 +281,11 @@ def create_app(run_dir: str | Path, engine: Engine, settings: QueueSettings, ui_
         with read_session(engine) as s:
             return JSONResponse(views.progress(s, p.user, settings.time_tolerance_s, settings.control_hz))
 
+    # the five requests of every reviewed item: FastLane answers their plain case before
+    # FastAPI's routing, these routes the rest (same answers: `Handlers`)
     @app.post("/api/queue/next")
     async def next_item(p: auth.Principal = Depends(who)):
-        item = await anyio.to_thread.run_sync(fastwrite.next_item, engine, p.user, settings, limiter=writers())
-        return JSONResponse({"item": item})
+        return Response(await h.next_item(p), media_type="application/json")
 
     @app.post("/api/items/{item_id}/lease")
     def lease(item_id: int, p: auth.Principal = Depends(who)):
@@ -248,36 +293,21 @@ def create_app(run_dir: str | Path, engine: Engine, settings: QueueSettings, ui_
             lease = workflow.lease_item(s, p.user, workflow.get_item(s, item_id), settings)
             return {"item": item_id, "expires_at": audit.iso(lease.expires_at)}
 
-    # the three reads of every item page run in the event loop: a few prebuilt indexed reads
-    # (fastread) and, once loaded, cached tables cost less than the hop to a thread and back
     @app.get("/api/items/{item_id}")
     async def item(item_id: int, p: auth.Principal = Depends(who)):
-        return Response(fastread.reviewer_view_json(engine, item_id, p.user), media_type="application/json")
-
-    async def _table(item_id: int, kind: str) -> Response:
-        ctx = fastread.item_info(engine, item_id).context
-        path = media.safe_path(run_dir, ctx.get(kind) or "")
-        if path is None:
-            raise NotFound(f"item {item_id} has no {kind} table")
-        body = media.cached_table_json(kind, path)
-        if body is None:  # first read of this file: parquet, in a thread
-            body = await run_in_threadpool(media.table_json, kind, path)
-        return Response(body, media_type="application/json", headers={"Cache-Control": "private, max-age=300"})
+        return Response(h.item(item_id, p), media_type="application/json")
 
     @app.get("/api/items/{item_id}/evidence")
     async def evidence(item_id: int, _p: auth.Principal = Depends(who)):
-        return await _table(item_id, "evidence")
+        return Response(await h.table(item_id, "evidence"), media_type="application/json", headers=TABLE_CACHE)
 
     @app.get("/api/items/{item_id}/frames")
     async def frames(item_id: int, _p: auth.Principal = Depends(who)):
-        return await _table(item_id, "frames")
+        return Response(await h.table(item_id, "frames"), media_type="application/json", headers=TABLE_CACHE)
 
     @app.post("/api/items/{item_id}/review")
     async def review(item_id: int, body: DecisionIn, p: auth.Principal = Depends(who)):
-        payload = {**body.model_dump(mode="json", exclude={"fields"}), "fields": _edits(body.fields)}
-        out = await anyio.to_thread.run_sync(fastwrite.decide, engine, p.user, item_id, payload, settings,
-                                             limiter=writers())
-        return JSONResponse(out)
+        return Response(await h.review(item_id, body, p), media_type="application/json")
 
     def _reviews_visible(s, p: auth.Principal, item_id: int, whole_episode: bool = False):
         # blindness: nobody reads an item's reviews while they are being collected, nobody
