@@ -153,6 +153,7 @@ class Handlers:
 
     def __init__(self, run_dir: Path, engine: Engine, settings: QueueSettings, writers):
         self.run_dir, self.engine, self.settings, self.writers = run_dir, engine, settings, writers
+        self.paths: dict[str, Path] = {}  # a table's path as stored -> the file it resolved to
 
     async def next_item(self, p: auth.Principal) -> bytes:
         item = await anyio.to_thread.run_sync(fastwrite.next_item, self.engine, p.user, self.settings,
@@ -164,12 +165,25 @@ class Handlers:
 
     async def table(self, item_id: int, kind: str) -> bytes:
         ctx = fastread.item_info(self.engine, item_id).context
-        path = media.safe_path(self.run_dir, ctx.get(kind) or "")
-        if path is None:
-            raise NotFound(f"item {item_id} has no {kind} table")
-        body = media.cached_table_json(kind, path)
-        if body is None:  # first read of this file: parquet, in a thread
-            body = await run_in_threadpool(media.table_json, kind, path)
+        rel = ctx.get(kind) or ""
+        # a path checked once stays checked: what is served is the file it resolved to, inside
+        # the run (resolving it anew costs more than the rest of the answer); gone -> checked again
+        path, body = self.paths.get(rel), None
+        if path is not None:
+            try:
+                body = media.cached_table_json(kind, path)
+            except OSError:
+                self.paths.pop(rel, None)
+        if body is None:
+            path = media.safe_path(self.run_dir, rel)
+            if path is None:
+                raise NotFound(f"item {item_id} has no {kind} table")
+            if len(self.paths) > 4096:
+                self.paths.clear()
+            self.paths[rel] = path
+            body = media.cached_table_json(kind, path)
+            if body is None:  # first read of this file: parquet, in a thread
+                body = await run_in_threadpool(media.table_json, kind, path)
         return body
 
     async def review(self, item_id: int, body: DecisionIn, p: auth.Principal) -> bytes:

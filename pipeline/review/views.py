@@ -169,6 +169,37 @@ def day_start(t: float) -> float:
     return t - t % 86400
 
 
+_PAIRS: dict[tuple, tuple[int, int, tuple[int, ...]]] = {}  # see progress
+
+
+def _count_pairs(s: Session, user_id: int, item_ids: list[int], tolerance_s: float, control_hz: int, db: str) -> None:
+    """Per closed item: (pairs of me and another reviewer, pairs agreeing on every field,
+    pairs agreeing per field), by the queue's own rule (`fields.agreement`)."""
+    # the item's control rate only, not its whole context (phases, events)
+    rows = s.execute(select(Review.item_id, Item.created_at, Review.reviewer_id, Review.values,
+                            Item.context["control_hz"].as_integer())
+                     .join(Item, Item.id == Review.item_id).where(Review.item_id.in_(item_ids))
+                     .order_by(Review.item_id, Review.id)).all()
+    by_item: dict[tuple, list] = {}
+    for item_id, created, reviewer_id, values, hz in rows:
+        by_item.setdefault((item_id, created), []).append((reviewer_id, values, control_hz if hz is None else hz))
+    if len(_PAIRS) > 500_000:
+        _PAIRS.clear()
+    for (item_id, created), reviews in by_item.items():
+        mine = next(v for r, v, _ in reviews if r == user_id)
+        n = whole = 0
+        per_field = [0] * len(FIELDS)
+        for r, other, hz in reviews:
+            if r == user_id:
+                continue
+            _, disputed = agreement([mine, other], tolerance_s, hz)
+            n += 1
+            whole += not disputed
+            for j, f in enumerate(FIELDS):
+                per_field[j] += f not in disputed
+        _PAIRS[(db, user_id, item_id, created, tolerance_s, control_hz)] = (n, whole, tuple(per_field))
+
+
 def progress(s: Session, user: User, tolerance_s: float, control_hz: int = 20) -> dict:
     """One reviewer's own progress: decisions today, items left to them, and how often their
     values agreed with each other reviewer's on items that have closed (all K reviews in).
@@ -180,32 +211,30 @@ def progress(s: Session, user: User, tolerance_s: float, control_hz: int = 20) -
     done_today = s.scalar(select(func.count(Review.id)).where(Review.reviewer_id == user.id,
                                                               Review.created_at >= today)) or 0
     left = s.scalar(select(func.count(Item.id)).where(_open_to(user, t))) or 0
-    closed = select(Review.item_id).join(Item, Item.id == Review.item_id).where(
-        Review.reviewer_id == user.id, Item.status.not_in(COLLECTING), Item.n_reviews >= Item.required_reviews)
-    rows = s.execute(select(Review.item_id, Review.reviewer_id, Review.values, Item.context)
-                     .join(Item, Item.id == Review.item_id).where(Review.item_id.in_(closed))
-                     .order_by(Review.item_id, Review.id)).all()
-    by_item: dict[int, list] = {}
-    for item_id, reviewer_id, values, ctx in rows:
-        by_item.setdefault(item_id, []).append((reviewer_id, values, (ctx or {}).get("control_hz", control_hz)))
+    closed = s.execute(select(Item.id, Item.created_at).join(Review, Review.item_id == Item.id).where(
+        Review.reviewer_id == user.id, Item.status.not_in(COLLECTING), Item.n_reviews >= Item.required_reviews)).all()
+    # a closed item's reviews never change: its pair counts are computed once per process
+    # (keyed by the database and the item's creation time too), so this costs what the
+    # items closed since the last call cost, not the reviewer's whole day
+    db = s.get_bind().url.render_as_string(hide_password=True)
+    keys = [(db, user.id, item_id, created, tolerance_s, control_hz) for item_id, created in closed]
+    todo = [k[2] for k in keys if k not in _PAIRS]
+    for i in range(0, len(todo), 500):
+        _count_pairs(s, user.id, todo[i:i + 500], tolerance_s, control_hz, db)
     pairs, whole = 0, 0
     per_field = dict.fromkeys(FIELDS, 0)
-    for reviews in by_item.values():
-        mine = next(v for r, v, _ in reviews if r == user.id)
-        for r, other, hz in reviews:
-            if r == user.id:
-                continue
-            _, disputed = agreement([mine, other], tolerance_s, hz)
-            pairs += 1
-            whole += not disputed
-            for f in FIELDS:
-                per_field[f] += f not in disputed
+    for k in keys:
+        n, w, by_field = _PAIRS[k]
+        pairs += n
+        whole += w
+        for f, c in zip(FIELDS, by_field):
+            per_field[f] += c
     share = (lambda n: round(n / pairs, 4) if pairs else None)
     return {
         "done_today": done_today,
         "day_start": iso(today),
         "left": left,
-        "agreement": {"closed_items": len(by_item), "pairs": pairs, "all_fields": share(whole),
+        "agreement": {"closed_items": len(closed), "pairs": pairs, "all_fields": share(whole),
                       "by_field": {f: share(n) for f, n in per_field.items()}},
     }
 
