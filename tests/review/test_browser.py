@@ -380,7 +380,7 @@ def test_adjudication_page_fits_without_scrolling(browser, server, engine, peopl
         page.wait_for_selector("#btn-adjudicate")
         if shots:
             page.wait_for_function(VIDEOS_STILL)
-            page.screenshot(path=f"{shots}/adjudication_{size[0]}x{size[1]}.png")
+            page.screenshot(path=f"{shots}/adjudication_all_disputed_{size[0]}x{size[1]}.png")
         assert out_of_view(page, panel) == [], size
         assert page.evaluate("document.scrollingElement.scrollHeight <= innerHeight"), size
         side = page.evaluate("(() => { const s = document.querySelector('.side'); "
