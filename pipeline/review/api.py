@@ -37,7 +37,7 @@ from sqlalchemy import select
 from sqlalchemy.engine import Engine
 
 from pipeline.records import Category, Level
-from pipeline.review import adjudication, audit, auth, fastlane, fastread, fastwrite, media, views, workflow
+from pipeline.review import adjudication, audit, auth, fastlane, fastread, fastwrite, media, rawsql, views, workflow
 from pipeline.review.fastlane import FastLane
 from pipeline.review.db import COLLECTING, Item, Review, read_session, write_session
 from pipeline.review.errors import Forbidden, NotFound, ReviewError
@@ -155,10 +155,17 @@ class Handlers:
         self.run_dir, self.engine, self.settings, self.writers = run_dir, engine, settings, writers
         self.paths: dict[str, Path] = {}  # a table's path as stored -> the file it resolved to
 
+    async def _write(self, fn, *args):
+        # the writer lock is free most of the time: then the write (a fraction of a millisecond)
+        # runs here, in the event loop, without the hop to a thread and back; held: in a thread,
+        # waiting for it (rawsql.Busy: nothing was done, so it is done again from the start)
+        try:
+            return fn(*args, wait=False)
+        except rawsql.Busy:
+            return await anyio.to_thread.run_sync(fn, *args, limiter=self.writers())
+
     async def next_item(self, p: auth.Principal) -> bytes:
-        item = await anyio.to_thread.run_sync(fastwrite.next_item, self.engine, p.user, self.settings,
-                                              limiter=self.writers())
-        return fastlane.dumps({"item": item})
+        return fastlane.dumps({"item": await self._write(fastwrite.next_item, self.engine, p.user, self.settings)})
 
     def item(self, item_id: int, p: auth.Principal) -> bytes:
         return fastread.reviewer_view_json(self.engine, item_id, p.user)
@@ -188,9 +195,7 @@ class Handlers:
 
     async def review(self, item_id: int, body: DecisionIn, p: auth.Principal) -> bytes:
         payload = {**body.model_dump(mode="json", exclude={"fields"}), "fields": _edits(body.fields)}
-        out = await anyio.to_thread.run_sync(fastwrite.decide, self.engine, p.user, item_id, payload, self.settings,
-                                             limiter=self.writers())
-        return fastlane.dumps(out)
+        return fastlane.dumps(await self._write(fastwrite.decide, self.engine, p.user, item_id, payload, self.settings))
 
 
 

@@ -249,6 +249,23 @@ class _WriterLock:
             self.thread.release()
             raise
 
+    def try_enter(self) -> bool:
+        """Take the lock only if nobody holds it; False (nothing taken) if someone does."""
+        if not self.thread.acquire(blocking=False):
+            return False
+        try:
+            if self.path is not None:
+                if self.fd is None:
+                    self.fd = os.open(self.path, os.O_CREAT | os.O_RDWR, 0o600)
+                fcntl.flock(self.fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            self.thread.release()
+            return False
+        except BaseException:
+            self.thread.release()
+            raise
+        return True
+
     def __exit__(self, *exc) -> None:
         try:
             if self.fd is not None:

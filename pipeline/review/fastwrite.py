@@ -28,7 +28,7 @@ from pipeline.review.db import COLLECTING, CONFLICT, FINAL, LEASED, PENDING, REV
 from pipeline.review.db import now, write_session
 from pipeline.review.errors import NotFound, Stale
 from pipeline.review.fields import agreement
-from pipeline.review.rawsql import Stmt, param, reading, writing
+from pipeline.review.rawsql import Busy, Stmt, param, reading, writing
 
 I, L, R, E = Item.__table__, Lease.__table__, Review.__table__, Event.__table__
 _iid, _uid, _t = param("iid"), param("uid"), param("t")
@@ -111,8 +111,10 @@ def _close(cur, item: fastread.ItemInfo, before: str, cfg: workflow.QueueSetting
     return status
 
 
-def decide(engine: Engine, user: User, item_id: int, body: dict, cfg: workflow.QueueSettings) -> dict:
-    """Store a decision (the API's answer: replayed, version, decision, values, state)."""
+def decide(engine: Engine, user: User, item_id: int, body: dict, cfg: workflow.QueueSettings,
+           wait: bool = True) -> dict:
+    """Store a decision (the API's answer: replayed, version, decision, values, state).
+    `wait=False`: `rawsql.Busy` (nothing done) rather than wait for the writer lock."""
     with reading(engine) as cur:
         row = cur.first(fastread.MINE, iid=item_id, uid=user.id)  # the item's stamp and my review
     if row is None:
@@ -125,7 +127,7 @@ def decide(engine: Engine, user: User, item_id: int, body: dict, cfg: workflow.Q
         if int(body.get("version") or 0) != 0:
             raise Stale(f"your review of item {item.id} changed since you loaded it (version 0, you sent "
                         f"{body.get('version')})", current={"version": 0})
-        with writing(engine) as cur:
+        with writing(engine, wait) as cur:
             t = now()
             took = cur.first(_TAKE, iid=item.id, uid=user.id, t=t, uname=user.name)
             if took is not None:
@@ -143,6 +145,8 @@ def decide(engine: Engine, user: User, item_id: int, body: dict, cfg: workflow.Q
                         "state": "open" if status in COLLECTING else "closed"}
     # a change of one's review, a repeat, or a condition that failed (nothing was written):
     # the general path, which re-checks everything in its own transaction
+    if not wait:
+        raise Busy("the general path waits for the writer lock")
     with write_session(engine) as s:
         r, replayed = workflow.submit_review(s, user, item_id, body, cfg)
         item = workflow.get_item(s, item_id)
@@ -150,15 +154,17 @@ def decide(engine: Engine, user: User, item_id: int, body: dict, cfg: workflow.Q
                 "state": "open" if item.status in COLLECTING else "closed"}
 
 
-def next_item(engine: Engine, user: User, cfg: workflow.QueueSettings, candidates: int = 8) -> int | None:
-    """Lease the user's next item (as workflow.lease_next); the search runs before the lock."""
+def next_item(engine: Engine, user: User, cfg: workflow.QueueSettings, candidates: int = 8,
+              wait: bool = True) -> int | None:
+    """Lease the user's next item (as workflow.lease_next); the search runs before the lock.
+    `wait=False`: `rawsql.Busy` (nothing done) rather than wait for the writer lock."""
     t = now()
     params = {"uid": user.id, "t": t, "uname": user.name}
     with reading(engine) as cur:
         held = cur.first(_HELD, uid=user.id, t=t)
         rows = [] if held is not None else cur.all(_CANDIDATES, n=candidates, **params)
     if rows and not workflow.sweep_due(engine, t):
-        with writing(engine) as cur:
+        with writing(engine, wait) as cur:
             for row in rows:
                 if cur.first(_HOLD, iid=row.id, **params) is None:
                     continue  # taken meanwhile: the next candidate
@@ -168,6 +174,8 @@ def next_item(engine: Engine, user: User, cfg: workflow.QueueSettings, candidate
                 return row.id
     # an item held already (renewed), the periodic sweep, or every candidate taken (nothing
     # was written): the general path
+    if not wait:
+        raise Busy("the general path waits for the writer lock")
     with write_session(engine) as s:
         item = workflow.lease_next(s, user, cfg)
         return item.id if item is not None else None

@@ -16,7 +16,7 @@ from __future__ import annotations
 import threading
 from collections import namedtuple
 from collections.abc import Iterator
-from contextlib import contextmanager, nullcontext
+from contextlib import contextmanager
 
 from sqlalchemy import bindparam
 from sqlalchemy.engine import Engine
@@ -108,12 +108,21 @@ def reading(engine: Engine) -> Iterator[Cursor]:
         conn.close()  # back to the pool, which rolls back whatever is open
 
 
+class Busy(Exception):
+    """The writer lock is held by someone else (`writing(wait=False)`): nothing was done."""
+
+
 @contextmanager
-def writing(engine: Engine) -> Iterator[Cursor]:
+def writing(engine: Engine, wait: bool = True) -> Iterator[Cursor]:
     """One write transaction, committed on success and rolled back on any exception, under
-    the database's writer lock (as `db.write_session`)."""
+    the database's writer lock (as `db.write_session`); `wait=False`: `Busy` if it is held."""
     lock = writer_lock(engine)
-    with lock if lock is not None else nullcontext():
+    if lock is not None:
+        if wait:
+            lock.__enter__()
+        elif not lock.try_enter():
+            raise Busy("the writer lock is held")
+    try:
         conn = engine.raw_connection()
         cur = conn.cursor()
         try:
@@ -127,3 +136,6 @@ def writing(engine: Engine) -> Iterator[Cursor]:
         finally:
             cur.close()
             conn.close()
+    finally:
+        if lock is not None:
+            lock.__exit__(None, None, None)

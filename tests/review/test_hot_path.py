@@ -92,3 +92,34 @@ def test_an_unusual_decision_request_gets_fastapis_answer(server, people, items,
     assert r.headers["x-content-type-options"] == "nosniff"
     with read_session(engine) as s:
         assert s.get(Item, item).n_reviews == 0
+
+
+def test_a_write_that_finds_the_lock_held_waits_in_a_thread_and_is_stored_once(server, people, items, engine, settings):
+    # the event loop writes only when the writer lock is free; held, the write goes to a
+    # thread and waits (Busy leaves nothing behind, so it starts again from the beginning)
+    import threading
+    import time
+
+    from pipeline.review import fastwrite, rawsql
+    from pipeline.review.db import Review, writer_lock
+
+    ann = client(server, people, "ann")
+    item = ann.post("/api/queue/next").json()["item"]
+    lock = writer_lock(engine)
+    with read_session(engine) as s:
+        user = s.scalar(select(User).where(User.name == "ann"))
+    body = {"decision": "revise", "version": 0, "idempotency_key": "busy", "fields": {"recovery_level": "L2"}}
+    with lock:
+        assert not lock.try_enter()
+        with pytest.raises(rawsql.Busy):
+            fastwrite.decide(engine, user, item, body, settings, wait=False)
+        done: list[httpx.Response] = []
+        t = threading.Thread(target=lambda: done.append(decide(ann, item, "busy")))
+        t.start()
+        time.sleep(0.3)
+        assert done == []  # waiting for the lock, not refused
+    t.join(timeout=10)
+    assert done[0].status_code == 200 and done[0].json()["replayed"] is False
+    with read_session(engine) as s:
+        assert s.scalars(select(Review.idempotency_key).where(Review.item_id == item)).all() == ["busy"]
+
