@@ -214,9 +214,9 @@ def create_app(run_dir: str | Path, engine: Engine, settings: QueueSettings, ui_
     limiters: dict = {}
 
     def writers() -> anyio.CapacityLimiter:
-        # the two writes of every item (queue/next, decision) get threads of their own, so a
-        # decision never waits for a thread behind page loads (made lazily: a limiter
-        # belongs to the running event loop)
+        # the two writes of every item (queue/next, decision), when they must wait for the
+        # writer lock, wait in threads of their own, never behind page loads (made lazily: a
+        # limiter belongs to the running event loop)
         if "w" not in limiters:
             limiters["w"] = anyio.CapacityLimiter(WRITE_THREADS)
         return limiters["w"]

@@ -15,7 +15,8 @@ has been written and the write falls back to the general path in `workflow`, whi
 everything in its own transaction and answers with the precise error. Audit events are
 written in the same transaction as the change. The statements run on a DBAPI cursor
 (`rawsql`: a tenth of the ORM's cost, inside the lock too) with the item's unchanging data
-from `fastread`'s cache.
+from `fastread`'s cache. With `wait=False` a write that would wait for the lock raises
+`rawsql.Busy` having done nothing (the server then runs it in a thread that waits).
 """
 
 from __future__ import annotations
