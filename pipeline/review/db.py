@@ -164,6 +164,14 @@ _APPEND_ONLY = [
 ]
 
 
+# the queue's order over the open items only: fastwrite's candidate search walks it and stops
+# after a few items (without it, every open item was sorted for every `queue/next`)
+OPEN_QUEUE_INDEX = (
+    "CREATE INDEX IF NOT EXISTS ix_items_open_queue ON items (quarantined, n_reviews DESC, id) "
+    f"WHERE status IN ({', '.join(repr(s) for s in COLLECTING)})"
+)
+
+
 def default_url(run_dir: str | Path) -> str:
     return f"sqlite:///{Path(run_dir).resolve() / 'stage3' / 'review.sqlite'}"
 
@@ -182,7 +190,7 @@ def make_engine(url: str, busy_timeout_ms: int = 10_000) -> Engine:
     Base.metadata.create_all(engine)
     if sqlite:
         with engine.begin() as conn:
-            for stmt in _APPEND_ONLY:
+            for stmt in [*_APPEND_ONLY, OPEN_QUEUE_INDEX]:
                 conn.exec_driver_sql(stmt)
     return engine
 

@@ -21,7 +21,7 @@ from `fastread`'s cache. With `wait=False` a write that would wait for the lock 
 
 from __future__ import annotations
 
-from sqlalchemy import case, delete, exists, func, insert, or_, select, update
+from sqlalchemy import bindparam, case, delete, exists, func, insert, or_, select, update
 from sqlalchemy.engine import Engine
 
 from pipeline.review import fastread, workflow
@@ -84,10 +84,21 @@ _HELD = Stmt(select(L.c.id).join(I, I.c.id == L.c.item_id)
              .where(L.c.user_id == _uid, L.c.expires_at > _t, I.c.status.in_(COLLECTING)).limit(1))
 _all_leases = (select(func.count()).select_from(L).where(L.c.item_id == I.c.id, L.c.expires_at > _t)
                .scalar_subquery())
+def _indexed_by(sql: str, table: str, index: str) -> str:
+    out = sql.replace(f"\nFROM {table} \n", f"\nFROM {table} INDEXED BY {index} \n", 1)
+    if out == sql:
+        raise RuntimeError(f"no 'FROM {table}' to give the index {index} in: {sql[:120]}")
+    return out
+
+
+# on SQLite the search walks the partial index of the open queue, already in this order, and
+# stops after `n` items (db.OPEN_QUEUE_INDEX; its WHERE is this one, with the statuses as
+# literals); left to itself the planner took the status index and sorted every open item
+_open = I.c.status.in_(bindparam("open", list(COLLECTING), expanding=True, literal_execute=True))
 _CANDIDATES = Stmt(select(I.c.id, I.c.key, I.c.proposal)
-                   .where(I.c.status.in_(COLLECTING), I.c.n_reviews + _all_leases < I.c.required_reviews, _not_mine,
-                          _not_read)
-                   .order_by(I.c.quarantined, I.c.n_reviews.desc(), I.c.id).limit(param("n")))
+                   .where(_open, I.c.n_reviews + _all_leases < I.c.required_reviews, _not_mine, _not_read)
+                   .order_by(I.c.quarantined, I.c.n_reviews.desc(), I.c.id).limit(param("n")),
+                   sqlite_edit=lambda sql: _indexed_by(sql, "items", "ix_items_open_queue"))
 
 
 def _event(cur, actor: str, kind: str, item, before: dict | None, after: dict | None) -> None:

@@ -30,9 +30,9 @@ def param(name: str):
 
 
 class _Compiled:
-    def __init__(self, stmt, dialect):
+    def __init__(self, stmt, dialect, edit=None):
         c = stmt.compile(dialect=dialect, compile_kwargs={"render_postcompile": True})
-        self.sql = c.string
+        self.sql = edit(c.string) if edit is not None else c.string
         self.defaults = dict(c.params)  # literal values (IN lists, `+ 1`) and our named params
         self.required = {k for k, v in self.defaults.items() if v is None}
         self.order = tuple(c.positiontup) if c.positional else None
@@ -61,8 +61,9 @@ class _Compiled:
 class Stmt:
     """A Core statement compiled lazily, once per dialect."""
 
-    def __init__(self, stmt):
+    def __init__(self, stmt, sqlite_edit=None):
         self.stmt = stmt
+        self.sqlite_edit = sqlite_edit  # a change of the SQL text on SQLite (an index hint)
         self._compiled: dict[str, _Compiled] = {}
         self._lock = threading.Lock()
 
@@ -70,7 +71,8 @@ class Stmt:
         c = self._compiled.get(dialect.name)
         if c is None:
             with self._lock:
-                c = self._compiled.setdefault(dialect.name, _Compiled(self.stmt, dialect))
+                edit = self.sqlite_edit if dialect.name == "sqlite" else None
+                c = self._compiled.setdefault(dialect.name, _Compiled(self.stmt, dialect, edit))
         return c
 
 
