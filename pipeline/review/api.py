@@ -145,9 +145,9 @@ TABLE_CACHE = {"Cache-Control": "private, max-age=300"}
 
 class Handlers:
     """The answers (JSON bytes) to the five requests of every reviewed item, for the FastAPI
-    routes and for `FastLane`. Reads run in the event loop: a few prebuilt indexed reads
-    (fastread) and cached tables cost less than the hop to a thread and back; the two writes
-    run in threads of their own (they may wait for the writer lock)."""
+    routes and for `FastLane`. They run in the event loop: a few prebuilt indexed reads
+    (fastread), cached tables and a write under a free writer lock cost less than the hop to
+    a thread and back; only a write that must wait for the lock waits in a thread."""
 
     decision_model = DecisionIn
 
@@ -196,7 +196,6 @@ class Handlers:
     async def review(self, item_id: int, body: DecisionIn, p: auth.Principal) -> bytes:
         payload = {**body.model_dump(mode="json", exclude={"fields"}), "fields": _edits(body.fields)}
         return fastlane.dumps(await self._write(fastwrite.decide, self.engine, p.user, item_id, payload, self.settings))
-
 
 
 def create_app(run_dir: str | Path, engine: Engine, settings: QueueSettings, ui_dir: Path = UI_DIR,
