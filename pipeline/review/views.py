@@ -10,7 +10,7 @@ did not review the item, shows every reviewer's values beside the model's, per f
 from __future__ import annotations
 
 from sqlalchemy import func, select
-from sqlalchemy.orm import Session
+from sqlalchemy.orm import Session, defer
 
 from pipeline.review.audit import iso
 from pipeline.review.db import ADJUDICATING, COLLECTING, CONFLICT, Item, Lease, Review, User, now
@@ -115,11 +115,16 @@ def _row(item: Item) -> dict:
             "quarantined": item.quarantined, "quarantine_reason": item.quarantine_reason}
 
 
+# the queue lists rows of hundreds of items: their proposal and context (phases, events) are
+# not shown, and decoding them cost most of the page
+_LIST_ONLY = defer(Item.proposal), defer(Item.context), defer(Item.agreed), defer(Item.final)
+
+
 def queue(s: Session, user: User, can_adjudicate: bool, limit: int = 200) -> dict:
     """The queue page of one user: held items, items open to them, their past decisions, conflicts."""
     t = now()
     held = s.scalars(
-        select(Item).join(Lease, Lease.item_id == Item.id)
+        select(Item).options(*_LIST_ONLY).join(Lease, Lease.item_id == Item.id)
         .where(Lease.user_id == user.id, Lease.expires_at > t, Item.status.in_(COLLECTING)).order_by(Item.id)
     ).all()
     mine = select(Review.item_id).where(Review.reviewer_id == user.id)
@@ -127,9 +132,10 @@ def queue(s: Session, user: User, can_adjudicate: bool, limit: int = 200) -> dic
     open_q = (select(Item).where(Item.status.in_(COLLECTING), Item.n_reviews + leases < Item.required_reviews,
                                  Item.id.not_in(mine), Item.id.not_in([i.id for i in held])))
     n_open = s.scalar(select(func.count()).select_from(open_q.subquery())) or 0
-    available = s.scalars(open_q.order_by(Item.quarantined, Item.n_reviews.desc(), Item.id).limit(limit)).all()
+    available = s.scalars(open_q.options(*_LIST_ONLY).order_by(Item.quarantined, Item.n_reviews.desc(), Item.id).limit(limit)).all()
     done = s.execute(
-        select(Item, Review).join(Review, Review.item_id == Item.id)
+        select(Item, Review).options(*_LIST_ONLY, defer(Review.values), defer(Review.edited))
+        .join(Review, Review.item_id == Item.id)
         .where(Review.reviewer_id == user.id).order_by(Review.updated_at.desc()).limit(limit)
     ).all()
     out = {
@@ -144,7 +150,7 @@ def queue(s: Session, user: User, can_adjudicate: bool, limit: int = 200) -> dic
     }
     if can_adjudicate:
         conflicts = s.scalars(
-            select(Item).where(Item.status.in_((CONFLICT, ADJUDICATING)), Item.id.not_in(mine)).order_by(Item.id)
+            select(Item).options(*_LIST_ONLY).where(Item.status.in_((CONFLICT, ADJUDICATING)), Item.id.not_in(mine)).order_by(Item.id)
         ).all()
         out["conflicts"] = [
             {**_row(i), "disputed": i.disputed or [], "status": i.status,
