@@ -123,7 +123,7 @@ def sign_out(engine: Engine, sid: str) -> None:
 
 @dataclass
 class Principal:
-    user: User
+    user: fastread.Actor  # the User row's attributes (no ORM instance: see fastread.Actor)
     csrf: str | None  # None when authenticated by bearer token
 
 
