@@ -178,9 +178,10 @@ def day_start(t: float) -> float:
 _PAIRS: dict[tuple, tuple[int, int, tuple[int, ...]]] = {}  # see progress
 
 
-def _count_pairs(s: Session, user_id: int, item_ids: list[int], tolerance_s: float, control_hz: int, db: str) -> None:
+def _count_pairs(s: Session, user_id: int, item_ids: list[int], tolerance_s: float, control_hz: int,
+                 db: str) -> dict[tuple, tuple]:
     """Per closed item: (pairs of me and another reviewer, pairs agreeing on every field,
-    pairs agreeing per field), by the queue's own rule (`fields.agreement`)."""
+    pairs agreeing per field), by the queue's own rule (`fields.agreement`); kept in _PAIRS."""
     # the item's control rate only, not its whole context (phases, events)
     rows = s.execute(select(Review.item_id, Item.created_at, Review.reviewer_id, Review.values,
                             Item.context["control_hz"].as_integer())
@@ -191,6 +192,7 @@ def _count_pairs(s: Session, user_id: int, item_ids: list[int], tolerance_s: flo
         by_item.setdefault((item_id, created), []).append((reviewer_id, values, control_hz if hz is None else hz))
     if len(_PAIRS) > 500_000:
         _PAIRS.clear()
+    out = {}
     for (item_id, created), reviews in by_item.items():
         mine = next(v for r, v, _ in reviews if r == user_id)
         n = whole = 0
@@ -203,7 +205,9 @@ def _count_pairs(s: Session, user_id: int, item_ids: list[int], tolerance_s: flo
             whole += not disputed
             for j, f in enumerate(FIELDS):
                 per_field[j] += f not in disputed
-        _PAIRS[(db, user_id, item_id, created, tolerance_s, control_hz)] = (n, whole, tuple(per_field))
+        out[(db, user_id, item_id, created, tolerance_s, control_hz)] = (n, whole, tuple(per_field))
+    _PAIRS.update(out)
+    return out
 
 
 def progress(s: Session, user: User, tolerance_s: float, control_hz: int = 20) -> dict:
@@ -224,13 +228,13 @@ def progress(s: Session, user: User, tolerance_s: float, control_hz: int = 20) -
     # items closed since the last call cost, not the reviewer's whole day
     db = s.get_bind().url.render_as_string(hide_password=True)
     keys = [(db, user.id, item_id, created, tolerance_s, control_hz) for item_id, created in closed]
-    todo = [k[2] for k in keys if k not in _PAIRS]
+    per_item = {k: _PAIRS.get(k) for k in keys}
+    todo = [k[2] for k, v in per_item.items() if v is None]
     for i in range(0, len(todo), 500):
-        _count_pairs(s, user.id, todo[i:i + 500], tolerance_s, control_hz, db)
+        per_item.update(_count_pairs(s, user.id, todo[i:i + 500], tolerance_s, control_hz, db))
     pairs, whole = 0, 0
     per_field = dict.fromkeys(FIELDS, 0)
-    for k in keys:
-        n, w, by_field = _PAIRS[k]
+    for n, w, by_field in per_item.values():
         pairs += n
         whole += w
         for f, c in zip(FIELDS, by_field):
