@@ -16,7 +16,7 @@ states.npy, steps.parquet, agentview + wrist MP4 at --fps, frames.parquet):
               mean pixel difference 1.4/255), and with the stage's default render:
               failures, which skips the videos of successes; all of these render in
               this process after the physics (`run_one`), one core
-  ours, render process   the stage's real path (`run_shard`, as a worker runs it): videos
+  ours, render process   the stage's real path (the runner's `run_shard`, as a worker runs it): videos
               drawn by the worker's render process while the next episode's physics runs
               (pipeline/stage1/render_pool.py), at fast quality, all videos and failures
               only; this uses the second core
@@ -52,8 +52,7 @@ from pipeline.sim.env import _quiet  # noqa: E402
 from pipeline.stage1.recorder import EpisodeRecorder  # noqa: E402
 from pipeline.stage1.units import plan_units  # noqa: E402
 from pipeline.stage1.video import frame_steps, write_videos  # noqa: E402
-from pipeline.stage1.units import Shard  # noqa: E402
-from pipeline.stage1.worker import run_one, run_shard  # noqa: E402
+from pipeline.stage1.worker import run_one  # noqa: E402
 
 
 class NaiveLiberoEnv(SimEnv):
@@ -243,12 +242,17 @@ def one_core(args, task, cfg, units, tmp: Path) -> None:
 
 
 def render_process_modes(units, fast_cfg, fail_cfg, tmp: Path) -> tuple[float, float]:
-    """`run_shard` in this process, as a worker runs it: its cached environment and render
+    """The runner's `run_shard` in this process, as a worker runs it: its cached environment and render
     process are warmed by one episode first (build excluded, like the other modes)."""
-    from pipeline.stage1 import worker
+    from pipeline.runner import WorkerContext
+    from pipeline.runner.runner import run_shard
+    from pipeline.stage1.stage import Stage1
+
+    ctx = WorkerContext()  # this process as one worker: env and render process kept across shards
 
     def shard(cfg, units, folder) -> None:
-        run_shard((Shard(tuple(units)), cfg.model_dump(mode="json"), str(tmp / folder), None), lambda ev: None)
+        cfg = cfg.model_copy(update={"run": cfg.run.model_copy(update={"output_dir": tmp / folder})})
+        run_shard((Stage1(cfg), tuple(units)), ctx)
 
     shard(fast_cfg, units[:1], "warm")
     out = []
@@ -256,8 +260,7 @@ def render_process_modes(units, fast_cfg, fail_cfg, tmp: Path) -> tuple[float, f
         t0 = time.perf_counter()
         shard(cfg, units, label.replace(" ", "_").replace(",", ""))
         out.append(report(label, time.perf_counter() - t0, len(units)))
-    worker._RENDER.close()
-    worker._RENDER = None
+    ctx.close()
     return out[0], out[1]
 
 

@@ -98,4 +98,5 @@ class Completions:
     def done_ids(self) -> set[str]:
         if not self.dir.exists():
             return set()
-        return {p.name[: -len(".done")] for p in self.dir.glob("*.done")}
+        # not the dot-named temporary file of a marker whose write was killed
+        return {p.name[: -len(".done")] for p in self.dir.glob("*.done") if not p.name.startswith(".")}

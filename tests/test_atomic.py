@@ -38,3 +38,12 @@ def test_completions_mark_and_list_units(tmp_path):
     c.mark_done("u1", {"steps": 3})
     c.mark_done("u2")
     assert c.is_done("u1") and c.done_ids() == {"u1", "u2"}
+
+
+def test_a_marker_write_killed_midway_leaves_a_temp_file_that_is_no_done_unit(tmp_path):
+    from pipeline.atomic import Completions
+
+    done = Completions(tmp_path)
+    done.mark_done("a")
+    (done.dir / ".b.done.x1y2.done").write_text("")  # what a SIGKILL between mkstemp and rename leaves
+    assert done.done_ids() == {"a"}

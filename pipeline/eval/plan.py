@@ -1,26 +1,23 @@
-"""Plan an evaluation: which trials to run, and how to shard them over workers.
+"""Plan an evaluation: which trials to run.
 
 Inputs: a validated `Config` and the scenes (`scenes.find_scenes`). Outputs: `Trial`s
 (scene trials for every policy x chunk size x scene x gripper condition x trial index,
 then RD reruns for every policy x scene x start state x rerun index at the first chunk
-size) and `Shard`s of them.
+size); the eval Stage (stage.py) shards them by task.
 
 Invariants: the plan is a pure function of the config and the scenes; unit ids are
-unique; every shard holds trials of one scene BDDL (task), so a worker builds one
-environment per shard; a task's trials are split over several shards only when there are
-fewer tasks than workers.
+unique.
 """
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass
 from pathlib import Path
 
 from pipeline.config import Config, PolicyConfig
 from pipeline.eval.protocol import Trial
 from pipeline.eval.rd import episode_dir, rd_starts
 from pipeline.eval.scenes import Scene
+from pipeline.layout import RunLayout
 
 
 def policy_name(p: PolicyConfig) -> str:
@@ -30,12 +27,12 @@ def policy_name(p: PolicyConfig) -> str:
 def default_scenes_dir(cfg: Config) -> Path:
     if cfg.eval.scenes_dir is not None:
         return Path(cfg.eval.scenes_dir)
-    release = Path(cfg.release.output_dir) if cfg.release.output_dir else cfg.out / "release"
-    return release if (release / "scenarios.parquet").is_file() else cfg.out / "stage2"
+    layout = RunLayout.of(cfg)
+    return layout.release.root if layout.release.manifest.is_file() else layout.stage2.root
 
 
 def stage1_dir(cfg: Config) -> Path:
-    return Path(cfg.eval.stage1_dir) if cfg.eval.stage1_dir else cfg.out / "stage1"
+    return Path(cfg.eval.stage1_dir) if cfg.eval.stage1_dir else RunLayout.of(cfg).stage1.root
 
 
 def plan_trials(cfg: Config, scenes: list[Scene]) -> tuple[list[Trial], list[str]]:
@@ -72,22 +69,3 @@ def plan_trials(cfg: Config, scenes: list[Scene]) -> tuple[list[Trial], list[str
     if len(set(ids)) != len(ids):
         raise ValueError("eval plan has duplicate unit ids (duplicate policy names in eval.policies?)")
     return trials, problems
-
-
-@dataclass(frozen=True)
-class Shard:
-    trials: tuple[Trial, ...]
-    policies: tuple[PolicyConfig, ...]  # every policy config of the run (workers build by name)
-
-
-def shard(trials: list[Trial], policies: list[PolicyConfig], workers: int) -> list[Shard]:
-    groups: dict[tuple, list[Trial]] = {}
-    for t in trials:
-        groups.setdefault((t.scene.suite, t.scene.task), []).append(t)
-    per_group = max(1, math.ceil(workers / max(1, len(groups))))
-    out = []
-    for group in groups.values():
-        n = min(per_group, len(group))
-        size = math.ceil(len(group) / n)
-        out += [Shard(tuple(group[i : i + size]), tuple(policies)) for i in range(0, len(group), size)]
-    return out

@@ -1,8 +1,9 @@
 """Where work runs is configuration: a local process pool (default) or Ray.
 
-Stage code hands an executor a function and a list of picklable work items; the function
-gets `(item, emit)` and may `emit(event)` small picklable events (progress) that reach the
-caller's `on_event` in the main process. A worker that dies under an item costs that item
+The runner (pipeline/runner/) hands an executor a function and a list of picklable work
+items; the function gets `(item, ctx)`, ctx being the worker's `WorkerContext`, and may
+`ctx.emit(event)` small picklable events (progress) that reach the caller's `on_event` in
+the main process. `inline` runs everything in the calling process. A worker that dies under an item costs that item
 one attempt, never the run (see base.py). Only `ray.py` imports ray, inside its methods.
 """
 
@@ -17,7 +18,10 @@ def make_executor(cfg: ExecutorConfig, worker_env: dict[str, str] | None = None)
         from pipeline.executors.ray import RayExecutor
 
         return RayExecutor(cfg.workers, cfg.ray_address, worker_env=worker_env, max_retries=cfg.max_retries)
-    from pipeline.executors.local import LocalExecutor
+    from pipeline.executors.local import InlineExecutor, LocalExecutor
+
+    if cfg.kind == "inline":
+        return InlineExecutor()
 
     return LocalExecutor(cfg.workers, worker_env=worker_env, max_retries=cfg.max_retries)
 

@@ -1,6 +1,10 @@
-"""The executor contract: run `fn(item, emit)` for every item, somewhere, and relay events.
+"""The executor contract: run `fn(item, ctx)` for every item, somewhere, and relay events.
 
-Inputs: a top-level (picklable) function, picklable items, an `on_event` callback.
+Inputs: a top-level (picklable) function, picklable items, an `on_event` callback. `ctx` is
+the worker's `WorkerContext` (pipeline/runner/context.py): built once per worker, kept
+across the items it runs (its environment and policy caches), closed when it stops;
+`ctx.emit(event)` relays an event to `on_event`. When a worker dies under an item and the
+item runs again, the executor itself emits a `retry` Event (pipeline/runner/events.py).
 Outputs: the functions' return values, in item order; `executor.report` says what was retried.
 Invariants: `on_event` runs in the calling process only; an exception raised by `fn`
 stops the run and is re-raised by `run` (per-item errors that should not stop a run are
@@ -27,7 +31,7 @@ from pydantic import BaseModel
 log = logging.getLogger("pipeline.executors")
 
 Emit = Callable[[Any], None]
-WorkFn = Callable[[Any, Emit], Any]
+WorkFn = Callable[[Any, Any], Any]  # (item, WorkerContext) -> result
 
 
 class Retry(BaseModel):
@@ -80,8 +84,14 @@ class Executor(ABC):
     @abstractmethod
     def run(self, fn: WorkFn, items: list, on_event: Callable[[Any], None] | None = None,
             label: Callable[[int, Any], str] = default_label) -> list:
-        """Run `fn(item, emit)` for each item; return results in item order (a `SetAside` for
+        """Run `fn(item, ctx)` for each item; return results in item order (a `SetAside` for
         an item whose workers kept dying); `label(index, item)` names items in the report."""
+
+
+def retry_event(r: Retry):
+    from pipeline.runner.events import Event
+
+    return Event(kind="retry", unit=r.label, reason=r.reason, attempt=r.attempt)
 
 
 def die_with_parent() -> None:

@@ -2,9 +2,9 @@
 
 Workers are spawned (not forked: EGL/MuJoCo state must not be shared), die with the
 parent (PR_SET_PDEATHSIG), and each talks to the caller over its own pipe: the caller sends
-one item at a time, the worker sends back its events, then the item's result. Module
-globals of the work function (e.g. a cached environment) persist across the items one
-worker process runs.
+one item at a time, the worker sends back its events, then the item's result. Each worker
+builds one `WorkerContext` and keeps it (its cached environment and policies) across the
+items it runs; it closes it on a normal stop.
 
 One pipe per worker is why this is not a `concurrent.futures.ProcessPoolExecutor`: that
 pool, when any worker dies, fails every item in flight with BrokenProcessPool and kills
@@ -28,7 +28,8 @@ from multiprocessing.connection import Connection, wait
 from typing import Any
 
 from pipeline.executors.base import (Executor, Retry, RunReport, SetAside, WorkFn, apply_worker_env, default_label,
-                                     die_with_parent)
+                                     die_with_parent, retry_event)
+from pipeline.runner.context import WorkerContext
 
 _STOP = b""  # the caller's "no more items" message
 
@@ -59,16 +60,18 @@ def _worker_main(conn: Connection, env: dict[str, str] | None) -> None:
         with lock:
             conn.send(("event", event))
 
+    ctx = WorkerContext(emit)
     while True:
         try:
             msg = conn.recv_bytes()
         except EOFError:  # the caller is gone
             return
         if msg == _STOP:
+            ctx.close()
             return  # a normal exit: atexit handlers (renderer teardown) run
         try:
             fn, item = pickle.loads(msg)
-            result = fn(item, emit)
+            result = fn(item, ctx)
             reply = pickle.dumps(("done", result))
         except BaseException as e:  # everything the caller must re-raise, pickling errors included
             reply = pickle.dumps(("error", _portable(e), traceback.format_exc()))
@@ -167,6 +170,8 @@ class LocalExecutor(Executor):
             reason = _death(w.proc)
             if attempts[i] <= self.max_retries:
                 report.retried.append(Retry(item=i, label=label(i, items[i]), attempt=attempts[i], reason=reason))
+                if on_event is not None:
+                    on_event(retry_event(report.retried[-1]))
                 todo.appendleft(i)  # first in line: a poison item is settled early
             else:
                 aside = SetAside(item=i, label=label(i, items[i]), attempts=attempts[i], reason=reason)
@@ -217,12 +222,19 @@ class LocalExecutor(Executor):
 
 
 class InlineExecutor(Executor):
-    """Runs everything in the calling process (debugging, profiling)."""
+    """Runs everything in the calling process (`executor.kind: inline`: debugging, profiling,
+    tests that patch something in this process). One WorkerContext per run, closed after it."""
 
     workers = 1
+
+    def __init__(self, workers: int = 1, worker_env: dict[str, str] | None = None, max_retries: int = 0):
+        self.report = RunReport()
 
     def run(self, fn: WorkFn, items: list, on_event: Callable[[Any], None] | None = None,
             label: Callable[[int, Any], str] = default_label) -> list:
         self.report = RunReport()
-        emit = on_event or (lambda ev: None)
-        return [fn(item, emit) for item in items]
+        ctx = WorkerContext(on_event)
+        try:
+            return [fn(item, ctx) for item in items]
+        finally:
+            ctx.close()

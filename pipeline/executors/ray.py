@@ -1,39 +1,55 @@
 """Ray executor: the same contract on a Ray cluster (`executor.kind: ray`).
 
 `ray_address` comes from the config (None starts a fresh local Ray instance; give the
-address to join a running cluster). Events travel
-through a `ray.util.queue.Queue`, an actor pinned to the driver's node so that losing a
-worker node never loses it. This is the only module that imports ray, and only inside
-methods, so the rest of the project runs without it installed.
+address to join a running cluster). Work runs on a pool of `workers` actors, one CPU each;
+each actor holds one `WorkerContext` (its environment and policies) across the items it
+runs, like a local worker process, and closes it when the run ends. Events travel through a
+`ray.util.queue.Queue`, an actor pinned to the driver's node so that losing a worker node
+never loses it. This is the only module that imports ray, and only inside methods, so the
+rest of the project runs without it installed.
 
-Items whose task dies with its worker or node (WorkerCrashedError, NodeDiedError, a lost
-result, the memory monitor's kill) are resubmitted by this loop rather than by Ray's own
-`max_retries`, so the run's report names every lost attempt; after `max_retries` more
-attempts the item is set aside (base.py). A result is fetched as soon as its task ends, so
-a node lost later does not take finished results with it. An exception raised by the work
-function itself (RayTaskError) still stops the run.
+Items whose actor dies under them (its process killed, its node lost, a lost result, the
+memory monitor's kill) are resubmitted by this loop to a live actor, and a replacement
+actor is started; so the run's report names every lost attempt, and after `max_retries`
+more attempts the item is set aside (base.py). A result is fetched as soon as its item
+ends, so a node lost later does not take finished results with it. An exception raised by
+the work function itself (RayTaskError) still stops the run.
 """
 
 from __future__ import annotations
 
+from collections import deque
 from collections.abc import Callable
 from typing import Any
 
 from pipeline.errors import FatalError
-from pipeline.executors.base import Executor, Retry, RunReport, SetAside, WorkFn, default_label
+from pipeline.executors.base import Executor, Retry, RunReport, SetAside, WorkFn, default_label, retry_event
 
 
-def _ray_call(fn: WorkFn, item: Any, events, env: dict[str, str] | None) -> Any:
-    from pipeline.executors.base import apply_worker_env
+class _Worker:
+    """One Ray actor (wrapped by `ray.remote` in `run`): a worker and its WorkerContext."""
 
-    apply_worker_env(env)
-    return fn(item, lambda ev: events.put(ev))
+    def __init__(self, env: dict[str, str] | None, events):
+        from pipeline.executors.base import apply_worker_env
+        from pipeline.runner.context import WorkerContext
+
+        apply_worker_env(env)
+        self.ctx = WorkerContext(lambda ev: events.put(ev))
+
+    def ready(self) -> bool:
+        return True
+
+    def run(self, fn: WorkFn, item: Any) -> Any:
+        return fn(item, self.ctx)
+
+    def close(self) -> None:
+        self.ctx.close()
 
 
 def _lost_worker_errors(ray) -> tuple[type, ...]:
-    """Failures of the machinery under a task, not of the work function: worth retrying."""
+    """Failures of the machinery under an item, not of the work function: worth retrying."""
     ex = ray.exceptions
-    return ex.WorkerCrashedError, ex.NodeDiedError, ex.ObjectLostError, ex.OutOfMemoryError
+    return ex.RayActorError, ex.WorkerCrashedError, ex.NodeDiedError, ex.ObjectLostError, ex.OutOfMemoryError
 
 
 class RayExecutor(Executor):
@@ -66,18 +82,21 @@ class RayExecutor(Executor):
             # runtime_env sets the variables before the worker process starts (Mesa reads them once)
             ray.init(**kwargs, runtime_env={"env_vars": self.worker_env or {}}, log_to_driver=False)
         lost_worker = _lost_worker_errors(ray)
-        pending: dict[Any, int] = {}  # task ref -> item index
+        running: dict[Any, tuple[int, Any]] = {}  # item ref -> (item index, actor)
+        starting: dict[Any, Any] = {}  # ready ref -> actor not yet known to be up
+        idle: deque = deque()
         try:
             here = NodeAffinitySchedulingStrategy(ray.get_runtime_context().get_node_id(), soft=False)
             events = Queue(actor_options={"num_cpus": 0, "scheduling_strategy": here})
-            # max_retries=0: this loop resubmits, so each lost attempt is seen and counted
-            remote = ray.remote(num_cpus=1, max_retries=0)(_ray_call)
+            # max_restarts=0: this loop replaces a dead actor and resubmits, so each lost attempt is counted
+            actor_cls = ray.remote(num_cpus=1, max_restarts=0, max_task_retries=0)(_Worker)
+            todo: deque[int] = deque(range(len(items)))
             attempts = [0] * len(items)
             results: list[Any] = [None] * len(items)
 
-            def submit(i: int) -> None:
-                attempts[i] += 1
-                pending[remote.remote(fn, items[i], events, self.worker_env)] = i
+            def start() -> None:
+                actor = actor_cls.remote(self.worker_env, events)
+                starting[actor.ready.remote()] = actor
 
             def drain() -> None:
                 while True:
@@ -91,32 +110,57 @@ class RayExecutor(Executor):
                         if on_event is not None:
                             on_event(ev)
 
-            for i in range(len(items)):
-                submit(i)
-            while pending:
-                done, _ = ray.wait(list(pending), num_returns=1, timeout=0.2)
+            def lost(i: int, e: Exception) -> None:
+                reason = f"{type(e).__name__}: {(str(e).strip().splitlines() or [''])[0][:200]}"
+                if attempts[i] <= self.max_retries:
+                    report.retried.append(Retry(item=i, label=label(i, items[i]), attempt=attempts[i], reason=reason))
+                    if on_event is not None:
+                        on_event(retry_event(report.retried[-1]))
+                    todo.appendleft(i)  # first in line: a poison item is settled early
+                else:
+                    results[i] = SetAside(item=i, label=label(i, items[i]), attempts=attempts[i], reason=reason)
+                    report.set_aside.append(results[i])
+
+            for _ in range(min(self.workers, len(items))):
+                start()
+            while todo or running:
+                while todo and idle:
+                    actor, i = idle.popleft(), todo.popleft()
+                    attempts[i] += 1
+                    running[actor.run.remote(fn, items[i])] = (i, actor)
+                done, _ = ray.wait(list(running) + list(starting), num_returns=1, timeout=0.2)
                 drain()
                 for ref in done:
-                    i = pending.pop(ref)
+                    if ref in starting:
+                        actor = starting.pop(ref)
+                        try:
+                            ray.get(ref)
+                            idle.append(actor)
+                        except lost_worker:
+                            start()  # it died starting up (its node went away): try another
+                        continue
+                    i, actor = running.pop(ref)
                     try:
-                        results[i] = ray.get(ref)  # re-raises a task's own exception now
+                        results[i] = ray.get(ref)  # re-raises the work function's own exception now
+                        idle.append(actor)
                     except lost_worker as e:
-                        reason = f"{type(e).__name__}: {(str(e).strip().splitlines() or [''])[0][:200]}"
-                        if attempts[i] <= self.max_retries:
-                            report.retried.append(Retry(item=i, label=label(i, items[i]), attempt=attempts[i],
-                                                        reason=reason))
-                            submit(i)
-                        else:
-                            results[i] = SetAside(item=i, label=label(i, items[i]), attempts=attempts[i],
-                                                  reason=reason)
-                            report.set_aside.append(results[i])
+                        ray.kill(actor, no_restart=True)
+                        start()
+                        lost(i, e)
             drain()
+            for actor in idle:  # a clean end: release environments and policies
+                try:
+                    ray.get(actor.close.remote(), timeout=60)
+                except Exception:  # noqa: BLE001 - closing is best effort; the actor is killed next
+                    pass
             events.shutdown()
-        except BaseException:
-            for ref in pending:  # a stopped run leaves no task behind writing files
-                ray.cancel(ref, force=True)
-            raise
         finally:
+            # killing the actors stops what they run: a stopped run leaves nothing behind writing files
+            for actor in [a for _, a in running.values()] + list(starting.values()) + list(idle):
+                try:
+                    ray.kill(actor, no_restart=True)
+                except Exception:  # noqa: BLE001 - already gone
+                    pass
             if started:
                 ray.shutdown()
         report.log()

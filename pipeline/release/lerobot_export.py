@@ -25,6 +25,7 @@ from rich.progress import Progress
 from pipeline.atomic import Completions, write_json, write_with
 from pipeline.config import Config
 from pipeline.errors import ConfigError
+from pipeline.layout import EpisodeFiles, RunLayout, episode_key
 from pipeline.records import read_episodes
 from pipeline.release import lerobot_format as fmt
 from pipeline.sim import EnvCache, SimEnv, get_task
@@ -78,12 +79,12 @@ def write_video(path: Path, frames: np.ndarray) -> None:
 
 
 def rollout_episodes(cfg: Config) -> list[ExportEpisode]:
-    stage1 = cfg.out / "stage1"
+    stage1 = RunLayout.of(cfg).stage1
     out = []
-    for e in read_episodes(stage1 / "episodes.parquet"):
+    for e in read_episodes(stage1.manifest):
         if cfg.release.lerobot_episodes == "failures" and e.success:
             continue
-        out.append(ExportEpisode(e.key, e.suite, e.task, e.instruction, stage1 / e.path, e.steps))
+        out.append(ExportEpisode(e.key, e.suite, e.task, e.instruction, stage1.episode(e).dir, e.steps))
     return sorted(out, key=lambda x: x.key)
 
 
@@ -92,13 +93,13 @@ def history_episodes(cfg: Config, manifest: Path) -> list[ExportEpisode]:
 
     if not manifest.is_file():
         return []
-    stage1 = cfg.out / "stage1"
-    eps = {e.key: e for e in read_episodes(stage1 / "episodes.parquet")}
+    stage1 = RunLayout.of(cfg).stage1
+    eps = {e.key: e for e in read_episodes(stage1.manifest)}
     out = []
     for r in read_manifest(manifest):
-        e = eps.get(f"{r.suite}/{r.task}/{r.episode_id}")
+        e = eps.get(episode_key(r.suite, r.task, r.episode_id))
         if e is not None and r.fail_step >= 1:
-            out.append(ExportEpisode(f"{e.key}@{r.step}", r.suite, r.task, r.instruction, stage1 / e.path,
+            out.append(ExportEpisode(f"{e.key}@{r.step}", r.suite, r.task, r.instruction, stage1.episode(e).dir,
                                      min(r.fail_step, e.steps)))
     return sorted(out, key=lambda x: x.key)
 
@@ -106,8 +107,9 @@ def history_episodes(cfg: Config, manifest: Path) -> list[ExportEpisode]:
 def export_episode(env: SimEnv, ep: ExportEpisode, i: int, start: int, task_index: int, root: Path,
                    size: int) -> dict:
     """Render and write episode `i`; return its episodes.jsonl/episodes_stats.jsonl entry."""
-    states = np.load(ep.folder / "states.npy")[: ep.length]
-    actions = np.array(pq.read_table(ep.folder / "steps.parquet").column("action").to_pylist())[: ep.length]
+    files = EpisodeFiles(ep.folder)
+    states = np.load(files.states)[: ep.length]
+    actions = np.array(pq.read_table(files.steps).column("action").to_pylist())[: ep.length]
     robot, frames = render_episode(env, states, size)
     table = fmt.frame_table(robot, actions, i, start, task_index)
     write_with(root / fmt.data_path(i), lambda p: pq.write_table(table, p))
@@ -138,15 +140,13 @@ def export_dataset(episodes: list[ExportEpisode], root: Path, work: Path, size: 
 
 
 def run(cfg: Config, out: Path | None = None) -> Path:
-    from pipeline.release.build import release_dir
-    from pipeline.release.manifest import MANIFEST_NAME
-
-    out = Path(out or cfg.release.lerobot_dir or cfg.out / "lerobot")
+    layout = RunLayout.of(cfg)
+    out = Path(out or cfg.release.lerobot_dir or layout.lerobot)
     size = cfg.release.lerobot_image_size
     if size % 2:
         raise ConfigError(f"release.lerobot_image_size must be even for yuv420p video, got {size}")
     datasets = {"rollouts": rollout_episodes(cfg),
-                "pre_failure_histories": history_episodes(cfg, release_dir(cfg) / MANIFEST_NAME)}
+                "pre_failure_histories": history_episodes(cfg, layout.release.manifest)}
     console = Console()
     with Progress(console=console, transient=True) as progress, EnvCache(capacity=1) as envs:
         for name, episodes in datasets.items():

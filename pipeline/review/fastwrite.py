@@ -30,6 +30,7 @@ from pipeline.review.db import now, write_session
 from pipeline.review.errors import NotFound, Stale
 from pipeline.review.fields import agreement
 from pipeline.review.rawsql import Busy, Stmt, param, reading, writing
+from pipeline.vocab import Decision, Resolution
 
 I, L, R, E = Item.__table__, Lease.__table__, Review.__table__, Event.__table__
 _iid, _uid, _t = param("iid"), param("uid"), param("t")
@@ -66,7 +67,7 @@ _CLOSE = {  # closing an item: conflict, or final with the agreed values
         version=I.c.version + 1, status=CONFLICT, agreed=param("agreed"), disputed=param("disputed"))),
     FINAL: Stmt(update(I).where(I.c.id == _iid).values(
         version=I.c.version + 1, status=FINAL, agreed=param("agreed"), disputed=param("disputed"),
-        final=param("final"), resolution="agreed", finalized_at=param("finalized_at"))),
+        final=param("final"), resolution=Resolution.agreed, finalized_at=param("finalized_at"))),
 }
 
 # a new lease: conditions as in workflow.lease_item (no lease of mine yet, room left)
@@ -143,7 +144,7 @@ def decide(engine: Engine, user: User, item_id: int, body: dict, cfg: workflow.Q
             t = now()
             took = cur.first(_TAKE, iid=item.id, uid=user.id, t=t, uname=user.name)
             if took is not None:
-                reason = ((body.get("reason") or "").strip() or None) if decision == "flag" else None
+                reason = ((body.get("reason") or "").strip() or None) if decision == Decision.flag else None
                 cur.run(_ADD_REVIEW, item_id=item.id, reviewer_id=user.id, decision=decision, values=values,
                         edited=edited, flag_reason=reason, idempotency_key=str(body["idempotency_key"]), version=1,
                         created_at=t, updated_at=t)

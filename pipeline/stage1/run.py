@@ -21,15 +21,15 @@ from pathlib import Path
 
 import yaml
 from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-from pipeline.atomic import Completions, write_text
+from pipeline.atomic import Completions
 from pipeline.config import Config, save_resolved
 from pipeline.errors import ConfigError
-from pipeline.executors import Executor, SetAside, make_executor
+from pipeline.executors import Executor, make_executor
+from pipeline.layout import RESOLVED_CONFIG, RunLayout
+from pipeline.runner import Runner
+from pipeline.stage1.stage import Stage1
 from pipeline.stage1.summary import collect_records, summarize, summary_table, write_manifest, write_summary
-from pipeline.stage1.units import Shard, make_shards, plan_units
-from pipeline.stage1.worker import run_shard
 
 # Extra environment of each worker process. Mesa's llvmpipe starts one render thread per
 # core in every worker, so LP_NUM_THREADS=1 looked worth trying with one worker per core; on
@@ -45,7 +45,7 @@ def _experiment(cfg: Config) -> dict:
 
 
 def _check_resumable(cfg: Config, stage1: Path) -> None:
-    saved = stage1 / "config.resolved.yaml"
+    saved = stage1 / RESOLVED_CONFIG
     if not saved.exists() or not Completions(stage1).done_ids():
         return
     old = Config.model_validate(yaml.safe_load(saved.read_text()))
@@ -56,11 +56,6 @@ def _check_resumable(cfg: Config, stage1: Path) -> None:
         )
 
 
-def _shard_label(shard: Shard) -> str:
-    suite, task = shard.task
-    return f"shard {suite}/{task} init states {','.join(str(u.init_state) for u in shard.units)}"
-
-
 def run(
     cfg: Config,
     policy_factory: Callable | None = None,
@@ -68,69 +63,39 @@ def run(
     console: Console | None = None,
 ) -> dict:
     console = console or Console()
-    stage1 = cfg.out / "stage1"
+    s1 = RunLayout.of(cfg).stage1
+    stage1 = s1.root
     _check_resumable(cfg, stage1)
     save_resolved(cfg, cfg.out)
     save_resolved(cfg, stage1)
 
-    units = plan_units(cfg)
-    done = Completions(stage1)
-    pending = [u for u in units if not done.is_done(u.unit_id)]
-    executor = executor or make_executor(cfg.executor, worker_env=WORKER_ENV)
-    shards = make_shards(pending, executor.workers)
+    stage = Stage1(cfg, policy_factory)
+    units = stage.units(cfg)
+    runner = Runner(executor or make_executor(cfg.executor, worker_env=WORKER_ENV), console=console)
+    pending = runner.pending(stage, units)
+    shards = stage.shards(pending, runner.executor.workers)
     console.print(
         f"stage 1: {len(units)} episodes planned, {len(units) - len(pending)} already done, "
-        f"{len(pending)} to run in {len(shards)} shard(s) on {executor.workers} worker(s) -> {stage1}"
+        f"{len(pending)} to run in {len(shards)} shard(s) on {runner.executor.workers} worker(s) -> {stage1}"
     )
-
-    stats = {"ran": 0, "ok": 0, "errors": []}
     t0 = time.perf_counter()
-    progress = Progress(
-        TextColumn("[bold]stage 1"), BarColumn(), MofNCompleteColumn(), TextColumn("{task.fields[rate]}"),
-        TextColumn("{task.fields[succ]}"), TimeElapsedColumn(), console=console, transient=False,
-    )
-
-    def fields() -> dict:
-        n = stats["ran"]
-        rate = n / max(time.perf_counter() - t0, 1e-9)
-        return {"rate": f"{rate:.2f} ep/s", "succ": f"success {stats['ok']}/{n}" if n else "success -"}
-
-    with progress:
-        bar = progress.add_task("episodes", total=len(units), completed=len(units) - len(pending), **fields())
-
-        def on_event(ev: dict) -> None:
-            if ev["kind"] == "episode":
-                stats["ran"] += 1
-                stats["ok"] += int(ev["success"])
-                progress.update(bar, advance=1, **fields())
-            elif ev["kind"] == "error":
-                stats["errors"].append(ev)
-                progress.console.print(f"[red]episode error[/red] {ev['unit']}: {ev['reason']}: {ev['detail']}")
-
-        jobs = [(s, cfg.model_dump(mode="json"), str(stage1), policy_factory) for s in shards]
-        results = executor.run(run_shard, jobs, on_event, label=lambda i, job: _shard_label(job[0]))
-        progress.update(bar, **fields())
-    # a shard whose worker kept dying: its unfinished episodes are errors, counted and retried on rerun
-    for shard, res in zip(shards, results):
-        if isinstance(res, SetAside):
-            for u in shard.units:
-                if not done.is_done(u.unit_id):
-                    write_text(stage1 / "errors" / f"{u.unit_id}.txt", f"worker died: {res.reason}\n")
-                    stats["errors"].append({"kind": "error", "unit": u.unit_id, "reason": "WorkerDied",
-                                            "detail": res.reason})
+    stats = runner.execute(stage, pending, done_before=len(units) - len(pending))
+    # every episode set aside (an exception, a dead render process, a shard whose worker kept
+    # dying) is an error: counted here, its file in stage1/errors/, retried on rerun
+    errors = [{"kind": "error", "unit": ev.unit, "reason": ev.reason, "detail": ev.detail} for ev in stats.set_aside]
 
     records = collect_records(stage1, [u.unit_id for u in units])
     manifest = write_manifest(stage1, records)
     rows = summarize(records)
     elapsed = time.perf_counter() - t0
-    write_summary(stage1, rows, {"planned": len(units), "done": len(records), "errors": stats["errors"],
-                                 "ran_this_time": stats["ran"], "wall_s": round(elapsed, 2),
-                                 "executor": executor.report.model_dump(mode="json")})
+    write_summary(stage1, rows, {"planned": len(units), "done": len(records), "errors": errors,
+                                 "ran_this_time": stats.ran, "wall_s": round(elapsed, 2),
+                                 "executor": stats.report.model_dump(mode="json")})
     console.print(summary_table(rows))
     missing = len(units) - len(records)
     msg = f"manifest {manifest} ({len(records)}/{len(units)} episodes)"
     if missing:
-        msg += f"; [red]{missing} episode(s) not done[/red] (errors in {stage1 / 'errors'}); rerun the same command to retry"
+        msg += f"; [red]{missing} episode(s) not done[/red] (errors in {s1.errors_dir}); rerun the same command to retry"
     console.print(msg)
-    return {"planned": len(units), "done": len(records), "ran": stats["ran"], "errors": stats["errors"],
+    return {"planned": len(units), "done": len(records), "ran": stats.ran, "errors": errors,
             "manifest": str(manifest), "wall_s": elapsed}

@@ -20,12 +20,12 @@ Output layout, under `<run.output_dir>/stage2/`:
     agreement.json, agreement.png                      VLM vs simstate (when a VLM ran)
     summary.json
     _done/<suite>__<task>__<episode_id>.done           completion markers, written last; they record
-                                                       the inputs' fingerprint (see pending.py)
+                                                       the inputs' fingerprint (see stage.py)
 
 Flow: (1) with a VLM backend, ask it about every pending episode (vlm_step, main process,
-`max_in_flight` concurrent requests); (2) the executor runs one unit per task (the env is
+`max_in_flight` concurrent requests); (2) the executor runs one shard per task (the env is
 built once per task): evidence -> simstate -> onset -> phases -> scene -> history -> record;
-(3) compile the reports. Resumable: episodes with a done marker are skipped unless their
+(3) compile the reports. The episodes run as a Stage (stage.py) through the Runner. Resumable: episodes with a done marker are skipped unless their
 inputs changed since (the marker records size + mtime of the stage-1 files and a hash of the
 manifest row), so a fixed file is picked up by the next run; reports are rebuilt from the
 per-episode files every time. Bad input never stops the stage: a manifest row that makes no
@@ -36,59 +36,39 @@ manifest as a whole is fatal.
 
 from __future__ import annotations
 
-from collections import defaultdict
-
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from pipeline.config import Config, save_resolved
 from pipeline.executors import make_executor
-from pipeline.records import EpisodeRecord
-from pipeline.stage2.layout import Stage2Paths
-from pipeline.stage2.pending import pending_failures
+from pipeline.runner import Runner
+from pipeline.layout import RunLayout
 from pipeline.stage2.report import write_reports
-from pipeline.stage2.worker import TaskUnit, process_task
+from pipeline.stage2.stage import Stage2
 
 console = Console()
 
 
-def task_units(cfg: Config, episodes: list[EpisodeRecord]) -> list[TaskUnit]:
-    by_task: dict[tuple[str, str], list[EpisodeRecord]] = defaultdict(list)
-    for e in episodes:
-        by_task[(e.suite, e.task)].append(e)
-    return [TaskUnit(suite=s, task=t, episodes=tuple(e.model_dump_json() for e in eps), run_dir=str(cfg.out),
-                     stage2_cfg=cfg.stage2.model_dump_json()) for (s, t), eps in sorted(by_task.items())]
-
-
-def _progress() -> Progress:
-    return Progress(TextColumn("{task.description}"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                    TextColumn("{task.fields[note]}"), console=console)
-
-
 def run(cfg: Config) -> dict:
-    paths = Stage2Paths(cfg.out / "stage2")
+    paths = RunLayout.of(cfg).stage2
     paths.root.mkdir(parents=True, exist_ok=True)
     save_resolved(cfg, paths.root)
-    todo, n_failed, n_success = pending_failures(cfg, paths)
+    stage = Stage2(cfg)
+    runner = Runner(make_executor(cfg.executor), console=console)
+    todo = runner.pending(stage, stage.units(cfg))
+    n_failed, n_success = stage.counts["failed"], stage.counts["successes"]
     console.print(f"stage 2: {n_failed} failed episodes ({n_success} successes skipped), "
                   f"{len(todo)} to do, localizer [bold]{cfg.stage2.vlm.backend}[/bold]")
-    with _progress() as prog:
-        if todo and cfg.stage2.vlm.backend != "simstate":
-            from pipeline.stage2.vlm_step import run_vlm
+    if todo and cfg.stage2.vlm.backend != "simstate":
+        from pipeline.stage2.vlm_step import run_vlm
 
-            bar = prog.add_task("VLM localization", total=len(todo), note="")
+        with Progress(TextColumn("VLM localization"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
+                      console=console) as prog:
+            bar = prog.add_task("vlm", total=len(todo))
             run_vlm(cfg, todo, paths, on_result=lambda: prog.advance(bar))
-        bar = prog.add_task("episodes", total=len(todo), note="")
-        counts: dict[str, int] = defaultdict(int)
-
-        def on_event(ev: dict) -> None:
-            counts[ev["status"] if ev["status"] == "scene" else f"q:{ev['reason']}"] += 1
-            prog.update(bar, advance=1, note=" ".join(f"{k}={v}" for k, v in sorted(counts.items())))
-
-        units = task_units(cfg, todo)
-        if units:
-            make_executor(cfg.executor).run(process_task, units, on_event=on_event)
+    if todo:
+        runner.execute(stage, todo)
     summary = write_reports(paths.root)
     _print_summary(summary, n_failed)
     if summary["set_aside"]:

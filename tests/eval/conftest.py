@@ -40,6 +40,7 @@ class HoldPolicy:
         self.name, self.gripper, self.chunk = name, gripper, chunk
         self.seeds: list[int] = []
         self.contexts: list[dict] = []
+        self.closed = False
 
     def reset(self, task, seed: int) -> None:
         self.seeds.append(seed)
@@ -54,7 +55,7 @@ class HoldPolicy:
         return {"gripper": self.gripper}
 
     def close(self) -> None:
-        pass
+        self.closed = True
 
 
 @dataclass(frozen=True)

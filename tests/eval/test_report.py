@@ -7,7 +7,7 @@ from pipeline.eval.report import compute, write_report
 from tests.eval.test_metrics import row
 
 
-def _rows() -> list[dict]:
+def _rows() -> list:
     rows = []
     for chunk, wins in ((8, [True, False, True, True]), (16, [False, False, True, False])):
         for i, w in enumerate(wins):

@@ -11,14 +11,14 @@ import yaml
 
 from pipeline.config import load_config
 from pipeline.eval import run as eval_run
-from pipeline.eval.records import read_rows
+from pipeline.eval.records import read_episodes
 from tests.eval.conftest import HoldPolicy
 
 
 def _config(tmp_path: Path, fixture_run, **eval_overrides) -> Path:
     raw = {
         "run": {"name": "evaltest", "output_dir": str(tmp_path / "run"), "seed": 0},
-        "executor": {"kind": "local", "workers": 1},
+        "executor": {"kind": "inline"},  # the patched policy factory lives in this process
         "eval": {"scenes_dir": str(fixture_run.scenes), "stage1_dir": str(fixture_run.stage1),
                  "trials_per_condition": 2, "horizon": 6, "gripper_settle_steps": 20} | eval_overrides,
     }
@@ -37,20 +37,20 @@ def hold_policies(monkeypatch):
 
     monkeypatch.setattr("pipeline.policies.factory.make_policy", make)
     yield built
-    assert eval_run._ENVS is None and eval_run._POLICIES == {}  # an inline run releases what it built
+    assert all(p.closed for p in built)  # an inline run releases what it built
 
 
 @pytest.mark.sim
 def test_eval_writes_records_and_report_and_a_rerun_redoes_only_missing_trials(tmp_path, fixture_run, hold_policies):
     cfg = load_config(_config(tmp_path, fixture_run))
     out = eval_run.run(cfg)
-    rows = read_rows(out / "episodes.parquet")
-    scene_rows = [r for r in rows if r["mode"] == "scene"]
-    rd_rows = [r for r in rows if r["mode"] == "rd"]
+    rows = read_episodes(out / "episodes.parquet")
+    scene_rows = [r for r in rows if r.mode == "scene"]
+    rd_rows = [r for r in rows if r.mode == "rd"]
     assert len(scene_rows) == 4  # 1 scene x 2 gripper conditions x 2 trials
-    assert sorted(r["rd_start_step"] for r in rd_rows) == [0, 20, 40, 60, 80]
-    assert {r["rd_phase"] for r in rd_rows if r["rd_start_step"] < 40} == {"pre"}
-    assert all(not r["success"] and r["steps"] == 6 for r in rows)
+    assert sorted(r.rd_start_step for r in rd_rows) == [0, 20, 40, 60, 80]
+    assert {r.rd_phase for r in rd_rows if r.rd_start_step < 40} == {"pre"}
+    assert all(not r.success and r.steps == 6 for r in rows)
     for name in ("report.md", "metrics.json", "rsr_heatmap.png", "gripper.png", "config.resolved.yaml",
                  "quarantine.jsonl"):
         assert (out / name).is_file(), name
@@ -89,26 +89,26 @@ def test_a_scene_with_a_broken_state_is_quarantined_with_its_reason(tmp_path, fi
     lines = [json.loads(x) for x in (out / "quarantine.jsonl").read_text().splitlines()]
     assert len(lines) == 2 and {x["reason"] for x in lines} == {"state_mismatch"}
     assert state.name in lines[0]["detail"]
-    assert read_rows(out / "episodes.parquet") == []
+    assert read_episodes(out / "episodes.parquet") == []
 
 
 @pytest.mark.sim
 def test_recover_eval_runs_the_scripted_policy_on_two_workers(tmp_path, fixture_run):
     cfg_path = _config(tmp_path, fixture_run, trials_per_condition=1, horizon=200, rd_every_steps=40)
     raw = yaml.safe_load(cfg_path.read_text())
-    raw["executor"]["workers"] = 2
+    raw["executor"] = {"kind": "local", "workers": 2}
     cfg_path.write_text(yaml.safe_dump(raw))
     recover = Path(sys.executable).with_name("recover")
     proc = subprocess.run([str(recover), "eval", "--config", str(cfg_path)], capture_output=True, text=True,
                           timeout=900)
     assert proc.returncode == 0, proc.stderr[-3000:]
     out = tmp_path / "run" / "eval"
-    rows = read_rows(out / "episodes.parquet")
-    scene_rows = [r for r in rows if r["mode"] == "scene"]
-    assert {r["gripper"] for r in scene_rows} == {"open", "closed"} and len(rows) == 2 + 3  # RD: 0, 40, 80
-    assert {r["policy_kind"] for r in rows} == {"scripted"}
+    rows = read_episodes(out / "episodes.parquet")
+    scene_rows = [r for r in rows if r.mode == "scene"]
+    assert {r.gripper for r in scene_rows} == {"open", "closed"} and len(rows) == 2 + 3  # RD: 0, 40, 80
+    assert {r.policy_kind for r in rows} == {"scripted"}
     # the clean scripted expert recovers this scene from either gripper condition
-    assert all(r["success"] and r["steps"] < 200 for r in scene_rows)
-    assert all(r["init_eef_drift_m"] < 0.01 for r in rows)
+    assert all(r.success and r.steps < 200 for r in scene_rows)
+    assert all(r.init_eef_drift_m < 0.01 for r in rows)
     report = (out / "report.md").read_text()
     assert "## Policy `scripted`" in report and "100.0 (2)" in report

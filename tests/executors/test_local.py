@@ -9,6 +9,7 @@ import pytest
 from pipeline.config import ExecutorConfig
 from pipeline.executors import SetAside, make_executor
 from pipeline.executors.local import InlineExecutor, LocalExecutor
+from pipeline.runner import Event
 from work_fns import counted, explode, read_env, square, write_once
 
 
@@ -50,7 +51,9 @@ def test_a_worker_killed_under_an_item_costs_only_that_item_one_attempt(tmp_path
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == names
     assert {n: _attempts(tmp_path, n) for n in names} == {n: 2 if n == "u1" else 1 for n in names}
     # the other worker was not torn down with the dead one: 2 workers + 1 replacement in all
-    assert len({e["pid"] for e in events}) == 3
+    assert len({e["pid"] for e in events if isinstance(e, dict)}) == 3
+    [retry_ev] = [e for e in events if isinstance(e, Event)]  # the executor's own: one lost attempt
+    assert (retry_ev.kind, retry_ev.unit, retry_ev.attempt) == ("retry", "u1", 1)
     [retry] = ex.report.retried
     assert (retry.label, retry.attempt) == ("u1", 1) and "SIGKILL" in retry.reason
     assert ex.report.set_aside == [] and "retried u1" in ex.report.summary()
@@ -78,5 +81,6 @@ def test_inline_executor_runs_in_this_process():
 
 def test_config_picks_the_executor():
     assert isinstance(make_executor(ExecutorConfig(kind="local", workers=3)), LocalExecutor)
+    assert isinstance(make_executor(ExecutorConfig(kind="inline")), InlineExecutor)
     assert make_executor(ExecutorConfig(kind="local", workers=3)).workers == 3
     assert make_executor(ExecutorConfig(kind="local", max_retries=5)).max_retries == 5

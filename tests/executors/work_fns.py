@@ -5,22 +5,22 @@ from __future__ import annotations
 import os
 
 
-def square(item, emit):
-    emit({"item": item, "pid": os.getpid()})
+def square(item, ctx):
+    ctx.emit({"item": item, "pid": os.getpid()})
     return item * item
 
 
-def read_env(item, emit):
+def read_env(item, ctx):
     return os.environ.get(item)
 
 
-def explode(item, emit):
+def explode(item, ctx):
     if item == 2:
         raise ValueError(f"item {item} is broken")
     return item
 
 
-def write_once(item, emit):
+def write_once(item, ctx):
     """Fault-test work: `item` is (folder, name, mode); writes folder/out/<name> atomically.
 
     mode "first": SIGKILL its own worker on the first attempt (a marker file in folder/died
@@ -39,7 +39,7 @@ def write_once(item, emit):
     (folder / "attempts").mkdir(parents=True, exist_ok=True)
     with open(folder / "attempts" / name, "a") as f:
         f.write(f"{os.getpid()}\n")
-    emit({"item": name, "pid": os.getpid()})
+    ctx.emit({"item": name, "pid": os.getpid()})
     marker = folder / "died" / name
     if mode == "always" or (mode == "first" and not marker.exists()):
         marker.parent.mkdir(parents=True, exist_ok=True)
@@ -54,7 +54,7 @@ def write_once(item, emit):
     return name
 
 
-def slow_write(item, emit):
+def slow_write(item, ctx):
     """Ray fault-test work: (folder, name, seconds) -> sleeps, then writes folder/<name> atomically."""
     import time
     from pathlib import Path
@@ -64,7 +64,7 @@ def slow_write(item, emit):
     from pipeline.atomic import write_text
 
     folder, name, seconds = item
-    emit({"item": name, "node": ray.get_runtime_context().get_node_id()})
+    ctx.emit({"item": name, "node": ray.get_runtime_context().get_node_id()})
     time.sleep(seconds)
     write_text(Path(folder) / name, f"{name}\n")
     return name
@@ -73,7 +73,7 @@ def slow_write(item, emit):
 _RUN_HERE = 0  # items this worker process has run: module globals live as long as the worker
 
 
-def counted(item, emit):
+def counted(item, ctx):
     global _RUN_HERE
     _RUN_HERE += 1
     return os.getpid(), _RUN_HERE

@@ -14,9 +14,13 @@ from pipeline.stage1.video import read_video
 
 from pipeline.atomic import Completions
 from pipeline.config import Config
-from pipeline.stage1 import worker
-from pipeline.stage1.units import make_shards, plan_units
-from pipeline.stage1.worker import run_one, run_shard
+from pipeline.runner import WorkerContext
+from pipeline.runner.runner import run_shard
+from pipeline.sim import get_task
+from pipeline.stage1.render_pool import RenderProcess
+from pipeline.stage1.stage import Stage1
+from pipeline.stage1.units import plan_units
+from pipeline.stage1.worker import run_one
 from toy_policy import DriftPolicy, make
 
 CAMERAS = ["agentview", "robot0_eye_in_hand"]
@@ -34,14 +38,28 @@ def _cfg(tmp_path, init_states=(4,)) -> Config:
     })
 
 
-@pytest.fixture(autouse=True)
-def _no_render_process_left():
-    """run_shard starts a render process in this (pytest) process: stop it after each test, so
-    no other test mistakes it for one of its own spawned workers."""
-    yield
-    if worker._RENDER is not None:
-        worker._RENDER.close()
-        worker._RENDER = None
+@pytest.fixture
+def events():
+    return []
+
+
+@pytest.fixture
+def ctx(events):
+    """This (pytest) process as a worker: run_shard starts a render process here; closing the
+    context stops it after each test, so no other test mistakes it for one of its workers."""
+    c = WorkerContext(events.append)
+    yield c
+    c.close()
+
+
+def _shard(cfg: Config, units) -> tuple[Stage1, tuple]:
+    stage = Stage1(cfg, make)
+    (shard,) = stage.shards(units, workers=1)
+    return stage, shard
+
+
+def _outcomes(events) -> list[str]:
+    return [e.kind for e in events if e.kind != "started"]
 
 
 def _files(folder) -> dict[str, bytes]:
@@ -49,16 +67,14 @@ def _files(folder) -> dict[str, bytes]:
 
 
 @pytest.mark.sim
-def test_render_process_writes_the_same_bytes_as_rendering_in_the_worker(tmp_path):
+def test_render_process_writes_the_same_bytes_as_rendering_in_the_worker(tmp_path, ctx, events):
     cfg = _cfg(tmp_path, init_states=(4, 5))
     units = plan_units(cfg)
     inline = tmp_path / "inline"
     for u in units:  # the in-process path on the worker's own (cached) environment
-        run_one(worker._env(u), DriftPolicy(), u, cfg, inline)
+        run_one(ctx.env(get_task(u.suite, u.task)), DriftPolicy(), u, cfg, inline)
     stage1 = tmp_path / "stage1"
-    events = []
-    (shard,) = make_shards(units, workers=1)
-    assert run_shard((shard, cfg.model_dump(mode="json"), str(stage1), make), events.append) == 2
+    assert run_shard(_shard(cfg, units), ctx) == 2
     done = Completions(stage1)
     for u in units:
         ours = _files(stage1 / u.rel_dir)
@@ -69,15 +85,16 @@ def test_render_process_writes_the_same_bytes_as_rendering_in_the_worker(tmp_pat
         a, b = (np.asarray(read_video(d / u.rel_dir / wrist), dtype=float) for d in (stage1, inline))
         assert a.shape == b.shape and np.abs(a - b).mean() < 3
         assert done.is_done(u.unit_id)
-    assert [e["kind"] for e in events] == ["episode", "episode"]
+    assert _outcomes(events) == ["done", "done"] and ctx.env_builds == 1  # one env for both paths
 
 
 @pytest.mark.sim
-def test_an_episode_whose_render_process_died_is_left_unmarked_redone_on_rerun_and_the_next_is_served(tmp_path, monkeypatch):
+def test_an_episode_whose_render_process_died_is_left_unmarked_redone_on_rerun_and_the_next_is_served(
+        tmp_path, monkeypatch, ctx, events):
     cfg = _cfg(tmp_path, init_states=(4, 5))
     units = plan_units(cfg)
     stage1 = tmp_path / "stage1"
-    submit = worker.RenderProcess.submit
+    submit = RenderProcess.submit
     killed = []
 
     def submit_then_die(self, ticket, *a, **kw):
@@ -87,17 +104,17 @@ def test_an_episode_whose_render_process_died_is_left_unmarked_redone_on_rerun_a
             self._proc.kill()
             self._proc.join()
 
-    monkeypatch.setattr(worker.RenderProcess, "submit", submit_then_die)
-    events = []
-    (shard,) = make_shards(units, workers=1)
-    run_shard((shard, cfg.model_dump(mode="json"), str(stage1), make), events.append)
+    monkeypatch.setattr(RenderProcess, "submit", submit_then_die)
+    job = _shard(cfg, units)
+    run_shard(job, ctx)
     done = Completions(stage1)
     first, second = units
     assert killed == [first.unit_id] and not done.is_done(first.unit_id)
     assert (stage1 / "errors" / f"{first.unit_id}.txt").read_text().startswith("render process died")
     assert done.is_done(second.unit_id)  # a fresh render process took the next episode
     assert np.load(stage1 / second.rel_dir / "states.npy").shape[0] == 14
-    assert sorted(e["kind"] for e in events) == ["episode", "error"]
+    assert sorted(_outcomes(events)) == ["done", "set_aside"]
+    assert [e.reason for e in events if e.kind == "set_aside"] == ["RenderError"]
     # the rerun redoes the unmarked episode only, videos included
-    assert run_shard((shard, cfg.model_dump(mode="json"), str(stage1), make), events.append) == 1
+    assert run_shard(job, ctx) == 1
     assert done.is_done(first.unit_id) and (stage1 / first.rel_dir / "video_agentview.mp4").exists()

@@ -19,8 +19,10 @@ from pipeline.config import VLMConfig
 from pipeline.errors import FatalError
 from pipeline.labelers.base import CharacterizeOutcome, Episode, Onset, Progress, Provenance
 from pipeline.labelers.vlm.backends import VLMBackend, VLMRequest, VLMResult, make_backend
-from pipeline.records import Characterization, Localization
+from pipeline.layout import RunLayout
+from pipeline.records import Characterization, Localization, QuarantineReason
 
+CAMERA = "agentview"  # the camera the VLM sees, for localization (stage2.vlm_step) and characterization
 
 def _duration(result: VLMResult, ep: Episode) -> float:
     """What the model saw: the sampled video, else the frame table, else the steps."""
@@ -38,10 +40,10 @@ def onset_of(result: VLMResult, ep: Episode) -> Onset:
 
     trace = {**Provenance.of(result).model_dump(), "latency_s": result.latency_s}
     if result.error:
-        return Onset(**trace, reason="backend_error", detail=result.error)
+        return Onset(**trace, reason=QuarantineReason.backend_error, detail=result.error)
     answer = parse_localization(result, _duration(result, ep))
     if isinstance(answer, Quarantine):
-        return Onset(**trace, reason=answer.reason.value, detail=answer.detail)
+        return Onset(**trace, reason=answer.reason, detail=answer.detail)
     return Onset(**trace, fail_time_s=float(answer.fail))
 
 
@@ -67,7 +69,7 @@ class VLMLocalizer:
         asked, requests = [], []
         for i, ep in enumerate(episodes):
             if ep.video is None:
-                out[i] = Onset(source=self.name, reason="no_video", detail=f"no agentview video in {ep.folder}")
+                out[i] = Onset(source=self.name, reason=QuarantineReason.no_video, detail=f"no agentview video in {ep.folder}")
                 continue
             requests.append(VLMRequest(task="localize", video=ep.video, instruction=ep.record.instruction,
                                        frames_table=ep.frames, key=ep.record.key))
@@ -86,7 +88,7 @@ class VLMCharacterizer:
         self.name = cfg.backend
         self.run_dir = Path(run_dir)
 
-    def _quarantine(self, loc: Localization, reason: str, detail: str, prov: Provenance | None = None):
+    def _quarantine(self, loc: Localization, reason: QuarantineReason, detail: str, prov: Provenance | None = None):
         prov = prov or Provenance(source=self.name)
         return prov.quarantine(loc.key, "stage3", reason, detail[:2000])
 
@@ -99,13 +101,12 @@ class VLMCharacterizer:
         requests, order = [], []
         out: list[CharacterizeOutcome | None] = [None] * len(locs)
         for i, loc in enumerate(locs):
-            suite, task, ep = loc.key.split("/", 2)
-            ep_dir = self.run_dir / "stage1" / "episodes" / suite / task / ep
-            video = ep_dir / "video_agentview.mp4"
+            files = RunLayout(self.run_dir).stage1.episode_of_key(loc.key)
+            video = files.video(CAMERA)
             if not video.is_file():
-                out[i] = self._quarantine(loc, "missing_video", f"{video}: no such file")
+                out[i] = self._quarantine(loc, QuarantineReason.missing_video, f"{video}: no such file")
                 continue
-            frames = ep_dir / "frames.parquet"
+            frames = files.frames
             requests.append(VLMRequest(task="characterize", video=video, instruction=loc.instruction,
                                        fail_time_s=loc.fail_time_s, key=loc.key,
                                        frames_table=pq.read_table(frames) if frames.is_file() else None))
@@ -114,7 +115,7 @@ class VLMCharacterizer:
             loc = locs[i]
             ans = parse_characterization(res)
             if isinstance(ans, Quarantine):
-                reason = "backend_error" if res.error else ans.reason.value
+                reason = QuarantineReason.backend_error if res.error else ans.reason
                 prov = Provenance.of(res, source=self.name).model_copy(update={"raw_text": res.raw_text or ans.raw_text})
                 out[i] = self._quarantine(loc, reason, res.error or ans.detail, prov)
             else:
