@@ -16,7 +16,8 @@ through the cookie need the CSRF header; errors are `{"detail", "field"?, "curre
 a request body that fails the schema is a 422 whose `field` names the bad field, and no
 error repeats a secret (a token field, a whole body, a long value); sign-in takes JSON only
 (415 otherwise, before the body is read). Decisions and queue/next write through
-`fastwrite` (short under the SQLite writer lock).
+`fastwrite` (short under the SQLite writer lock); the plain case of the five requests of
+every reviewed item is answered by `fastlane` before FastAPI's routing (same answers).
 """
 
 from __future__ import annotations
@@ -35,7 +36,8 @@ from sqlalchemy import select
 from sqlalchemy.engine import Engine
 
 from pipeline.records import Category, Decision, Level
-from pipeline.review import adjudication, audit, auth, fastwrite, media, views, workflow
+from pipeline.review import adjudication, audit, auth, fastlane, fastread, fastwrite, media, rawsql, views, workflow
+from pipeline.review.fastlane import FastLane
 from pipeline.review.db import COLLECTING, Item, Review, read_session, write_session
 from pipeline.review.errors import Forbidden, NotFound, ReviewError
 from pipeline.review.workflow import QueueSettings
@@ -137,6 +139,64 @@ class SecurityHeaders:
         await self.app(scope, receive, send_with_headers)
 
 
+TABLE_CACHE = {"Cache-Control": "private, max-age=300"}
+
+
+class Handlers:
+    """The answers (JSON bytes) to the five requests of every reviewed item, for the FastAPI
+    routes and for `FastLane`. They run in the event loop: a few prebuilt indexed reads
+    (fastread), cached tables and a write under a free writer lock cost less than the hop to
+    a thread and back; only a write that must wait for the lock waits in a thread."""
+
+    decision_model = DecisionIn
+
+    def __init__(self, run_dir: Path, engine: Engine, settings: QueueSettings, writers):
+        self.run_dir, self.engine, self.settings, self.writers = run_dir, engine, settings, writers
+        self.paths: dict[str, Path] = {}  # a table's path as stored -> the file it resolved to
+
+    async def _write(self, fn, *args):
+        # the writer lock is free most of the time: then the write (a fraction of a millisecond)
+        # runs here, in the event loop, without the hop to a thread and back; held: in a thread,
+        # waiting for it (rawsql.Busy: nothing was done, so it is done again from the start)
+        try:
+            return fn(*args, wait=False)
+        except rawsql.Busy:
+            return await anyio.to_thread.run_sync(fn, *args, limiter=self.writers())
+
+    async def next_item(self, p: auth.Principal) -> bytes:
+        return fastlane.dumps({"item": await self._write(fastwrite.next_item, self.engine, p.user, self.settings)})
+
+    def item(self, item_id: int, p: auth.Principal) -> bytes:
+        return fastread.reviewer_view_json(self.engine, item_id, p.user)
+
+    async def table(self, item_id: int, kind: str) -> bytes:
+        ctx = fastread.item_info(self.engine, item_id).context
+        rel = ctx.get(kind) or ""
+        # a path checked once stays checked: what is served is the file it resolved to, inside
+        # the run (resolving it anew costs more than the rest of the answer); gone -> checked again
+        path, body = self.paths.get(rel), None
+        if path is not None:
+            try:
+                body = media.cached_table_json(kind, path)
+            except OSError:
+                self.paths.pop(rel, None)
+        if body is None:
+            path = media.safe_path(self.run_dir, rel)
+            if path is None:
+                raise NotFound(f"item {item_id} has no {kind} table")
+            if len(self.paths) > 4096:
+                self.paths.clear()
+            self.paths[rel] = path
+            body = media.cached_table_json(kind, path)
+            if body is None:  # first read of this file: parquet, in a thread
+                body = await run_in_threadpool(media.table_json, kind, path)
+        return body
+
+    async def review(self, item_id: int, body: DecisionIn, p: auth.Principal) -> bytes:
+        payload = {**body.model_dump(mode="json", exclude={"fields"}), "fields": _edits(body.fields)}
+        return fastlane.dumps(await self._write(fastwrite.decide, self.engine, p.user, item_id, payload, self.settings))
+
+
 def create_app(run_dir: str | Path, engine: Engine, settings: QueueSettings, ui_dir: Path = UI_DIR,
                docs: bool = False) -> FastAPI:
     run_dir = Path(run_dir).resolve()
@@ -152,9 +212,9 @@ def create_app(run_dir: str | Path, engine: Engine, settings: QueueSettings, ui_
     limiters: dict = {}
 
     def writers() -> anyio.CapacityLimiter:
-        # the two writes of every item (queue/next, decision) get threads of their own, so a
-        # decision never waits for a thread behind page loads (made lazily: a limiter
-        # belongs to the running event loop)
+        # the two writes of every item (queue/next, decision), when they must wait for the
+        # writer lock, wait in threads of their own, never behind page loads (made lazily: a
+        # limiter belongs to the running event loop)
         if "w" not in limiters:
             limiters["w"] = anyio.CapacityLimiter(WRITE_THREADS)
         return limiters["w"]
@@ -164,7 +224,9 @@ def create_app(run_dir: str | Path, engine: Engine, settings: QueueSettings, ui_
     app.add_exception_handler(RequestValidationError, _validation_error)
     app.add_exception_handler(ReviewError, lambda _r, e: JSONResponse(status_code=e.status, content=e.body()))
 
-    app.add_middleware(SecurityHeaders)
+    h = Handlers(run_dir, engine, settings, writers)
+    app.add_middleware(FastLane, handlers=h)
+    app.add_middleware(SecurityHeaders)  # added last: outside FastLane, its answers get the headers too
 
     async def who(request: Request) -> auth.Principal:
         # in the event loop, not a worker thread: a sub-millisecond indexed read (WAL readers
@@ -236,10 +298,11 @@ def create_app(run_dir: str | Path, engine: Engine, settings: QueueSettings, ui_
         with read_session(engine) as s:
             return JSONResponse(views.progress(s, p.user, settings.time_tolerance_s, settings.control_hz))
 
+    # the five requests of every reviewed item: FastLane answers their plain case before
+    # FastAPI's routing, these routes the rest (same answers: `Handlers`)
     @app.post("/api/queue/next")
     async def next_item(p: auth.Principal = Depends(who)):
-        item = await anyio.to_thread.run_sync(fastwrite.next_item, engine, p.user, settings, limiter=writers())
-        return JSONResponse({"item": item})
+        return Response(await h.next_item(p), media_type="application/json")
 
     @app.post("/api/items/{item_id}/lease")
     def lease(item_id: int, p: auth.Principal = Depends(who)):
@@ -248,34 +311,20 @@ def create_app(run_dir: str | Path, engine: Engine, settings: QueueSettings, ui_
             return {"item": item_id, "expires_at": audit.iso(lease.expires_at)}
 
     @app.get("/api/items/{item_id}")
-    def item(item_id: int, p: auth.Principal = Depends(who)):
-        with read_session(engine) as s:
-            # JSONResponse directly: views are plain JSON already (skips FastAPI's re-encoding)
-            return JSONResponse(views.reviewer_view(s, workflow.get_item(s, item_id), p.user))
-
-    def _table(item_id: int, kind: str) -> Response:
-        with read_session(engine) as s:
-            ctx = workflow.get_item(s, item_id).context or {}
-        path = media.safe_path(run_dir, ctx.get(kind) or "")
-        if path is None:
-            raise NotFound(f"item {item_id} has no {kind} table")
-        body = media.evidence_json(path) if kind == "evidence" else media.frames_json(path)
-        return Response(body, media_type="application/json", headers={"Cache-Control": "private, max-age=300"})
+    async def item(item_id: int, p: auth.Principal = Depends(who)):
+        return Response(h.item(item_id, p), media_type="application/json")
 
     @app.get("/api/items/{item_id}/evidence")
-    def evidence(item_id: int, _p: auth.Principal = Depends(who)):
-        return _table(item_id, "evidence")
+    async def evidence(item_id: int, _p: auth.Principal = Depends(who)):
+        return Response(await h.table(item_id, "evidence"), media_type="application/json", headers=TABLE_CACHE)
 
     @app.get("/api/items/{item_id}/frames")
-    def frames(item_id: int, _p: auth.Principal = Depends(who)):
-        return _table(item_id, "frames")
+    async def frames(item_id: int, _p: auth.Principal = Depends(who)):
+        return Response(await h.table(item_id, "frames"), media_type="application/json", headers=TABLE_CACHE)
 
     @app.post("/api/items/{item_id}/review")
     async def review(item_id: int, body: DecisionIn, p: auth.Principal = Depends(who)):
-        payload = {**body.model_dump(mode="json", exclude={"fields"}), "fields": _edits(body.fields)}
-        out = await anyio.to_thread.run_sync(fastwrite.decide, engine, p.user, item_id, payload, settings,
-                                             limiter=writers())
-        return JSONResponse(out)
+        return Response(await h.review(item_id, body, p), media_type="application/json")
 
     def _reviews_visible(s, p: auth.Principal, item_id: int, whole_episode: bool = False):
         # blindness: nobody reads an item's reviews while they are being collected, nobody

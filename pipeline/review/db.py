@@ -166,6 +166,14 @@ _APPEND_ONLY = [
 ]
 
 
+# the queue's order over the open items only: fastwrite's candidate search walks it and stops
+# after a few items (without it, every open item was sorted for every `queue/next`)
+OPEN_QUEUE_INDEX = (
+    "CREATE INDEX IF NOT EXISTS ix_items_open_queue ON items (quarantined, n_reviews DESC, id) "
+    f"WHERE status IN ({', '.join(repr(s) for s in COLLECTING)})"
+)
+
+
 def default_url(run_dir: str | Path) -> str:
     return f"sqlite:///{RunLayout(Path(run_dir).resolve()).stage3.review_db}"
 
@@ -184,7 +192,7 @@ def make_engine(url: str, busy_timeout_ms: int = 10_000) -> Engine:
     Base.metadata.create_all(engine)
     if sqlite:
         with engine.begin() as conn:
-            for stmt in _APPEND_ONLY:
+            for stmt in [*_APPEND_ONLY, OPEN_QUEUE_INDEX]:
                 conn.exec_driver_sql(stmt)
     return engine
 
@@ -251,6 +259,23 @@ class _WriterLock:
             self.thread.release()
             raise
 
+    def try_enter(self) -> bool:
+        """Take the lock only if nobody holds it; False (nothing taken) if someone does."""
+        if not self.thread.acquire(blocking=False):
+            return False
+        try:
+            if self.path is not None:
+                if self.fd is None:
+                    self.fd = os.open(self.path, os.O_CREAT | os.O_RDWR, 0o600)
+                fcntl.flock(self.fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            self.thread.release()
+            return False
+        except BaseException:
+            self.thread.release()
+            raise
+        return True
+
     def __exit__(self, *exc) -> None:
         try:
             if self.fd is not None:
@@ -263,7 +288,8 @@ _WRITE_LOCKS: dict[tuple[int, str], _WriterLock] = {}
 _WRITE_LOCKS_GUARD = threading.Lock()
 
 
-def _writer_lock(engine: Engine) -> _WriterLock | None:
+def writer_lock(engine: Engine) -> _WriterLock | None:
+    """The lock every writer of this engine's SQLite file takes (None for other databases)."""
     if engine.dialect.name != "sqlite":
         return None
     with _WRITE_LOCKS_GUARD:
@@ -280,7 +306,7 @@ def _writer_lock(engine: Engine) -> _WriterLock | None:
 def write_session(engine: Engine) -> Iterator[Session]:
     """One write transaction (BEGIN IMMEDIATE): committed on success, rolled back on any
     exception; on SQLite taken under the file's writer lock (`_WriterLock`)."""
-    lock = _writer_lock(engine)
+    lock = writer_lock(engine)
     if lock is not None:
         lock.__enter__()
     try:

@@ -56,19 +56,35 @@ def evidence(path: Path) -> dict:
 
 def evidence_json(path: Path) -> bytes:
     """`evidence` encoded once (encoding thousands of floats per request costs more than reading)."""
-    return _encoded("evidence", *_stamp(path))
+    return table_json("evidence", path)
 
 
 def frames_json(path: Path) -> bytes:
-    return _encoded("frames", *_stamp(path))
+    return table_json("frames", path)
 
 
-@lru_cache(maxsize=256)
-def _encoded(kind: str, path: str, mtime: int, size: int) -> bytes:
+_ENCODED: dict[tuple, bytes] = {}  # (kind, path, mtime, size) -> the encoded table
+_ENCODED_MAX = 256
+
+
+def table_json(kind: str, path: Path) -> bytes:
+    """The `kind` ("evidence" or "frames") table of `path`, encoded (cached by file stamp)."""
     import json
 
-    table = _evidence(path, mtime, size) if kind == "evidence" else _frames(path, mtime, size)
-    return json.dumps(table, separators=(",", ":")).encode()
+    key = (kind, *_stamp(path))
+    body = _ENCODED.get(key)
+    if body is None:
+        table = _evidence(*key[1:]) if kind == "evidence" else _frames(*key[1:])
+        body = json.dumps(table, separators=(",", ":")).encode()
+        if len(_ENCODED) >= _ENCODED_MAX:
+            _ENCODED.clear()
+        _ENCODED[key] = body
+    return body
+
+
+def cached_table_json(kind: str, path: Path) -> bytes | None:
+    """`table_json` if it is cached (no file is read: safe to call in the event loop), else None."""
+    return _ENCODED.get((kind, *_stamp(path)))
 
 
 @lru_cache(maxsize=256)

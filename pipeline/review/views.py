@@ -10,7 +10,7 @@ did not review the item, shows every reviewer's values beside the model's, per f
 from __future__ import annotations
 
 from sqlalchemy import func, select
-from sqlalchemy.orm import Session
+from sqlalchemy.orm import Session, defer
 
 from pipeline.review.audit import iso
 from pipeline.review.db import ADJUDICATING, COLLECTING, CONFLICT, Item, Lease, Review, User, now
@@ -115,11 +115,16 @@ def _row(item: Item) -> dict:
             "quarantined": item.quarantined, "quarantine_reason": item.quarantine_reason}
 
 
+# the queue lists rows of hundreds of items: their proposal and context (phases, events) are
+# not shown, and decoding them cost most of the page
+_LIST_ONLY = defer(Item.proposal), defer(Item.context), defer(Item.agreed), defer(Item.final)
+
+
 def queue(s: Session, user: User, can_adjudicate: bool, limit: int = 200) -> dict:
     """The queue page of one user: held items, items open to them, their past decisions, conflicts."""
     t = now()
     held = s.scalars(
-        select(Item).join(Lease, Lease.item_id == Item.id)
+        select(Item).options(*_LIST_ONLY).join(Lease, Lease.item_id == Item.id)
         .where(Lease.user_id == user.id, Lease.expires_at > t, Item.status.in_(COLLECTING)).order_by(Item.id)
     ).all()
     mine = select(Review.item_id).where(Review.reviewer_id == user.id)
@@ -127,9 +132,10 @@ def queue(s: Session, user: User, can_adjudicate: bool, limit: int = 200) -> dic
     open_q = (select(Item).where(Item.status.in_(COLLECTING), Item.n_reviews + leases < Item.required_reviews,
                                  Item.id.not_in(mine), Item.id.not_in([i.id for i in held])))
     n_open = s.scalar(select(func.count()).select_from(open_q.subquery())) or 0
-    available = s.scalars(open_q.order_by(Item.quarantined, Item.n_reviews.desc(), Item.id).limit(limit)).all()
+    available = s.scalars(open_q.options(*_LIST_ONLY).order_by(Item.quarantined, Item.n_reviews.desc(), Item.id).limit(limit)).all()
     done = s.execute(
-        select(Item, Review).join(Review, Review.item_id == Item.id)
+        select(Item, Review).options(*_LIST_ONLY, defer(Review.values), defer(Review.edited))
+        .join(Review, Review.item_id == Item.id)
         .where(Review.reviewer_id == user.id).order_by(Review.updated_at.desc()).limit(limit)
     ).all()
     out = {
@@ -144,7 +150,7 @@ def queue(s: Session, user: User, can_adjudicate: bool, limit: int = 200) -> dic
     }
     if can_adjudicate:
         conflicts = s.scalars(
-            select(Item).where(Item.status.in_((CONFLICT, ADJUDICATING)), Item.id.not_in(mine)).order_by(Item.id)
+            select(Item).options(*_LIST_ONLY).where(Item.status.in_((CONFLICT, ADJUDICATING)), Item.id.not_in(mine)).order_by(Item.id)
         ).all()
         out["conflicts"] = [
             {**_row(i), "disputed": i.disputed or [], "status": i.status,
@@ -169,6 +175,41 @@ def day_start(t: float) -> float:
     return t - t % 86400
 
 
+_PAIRS: dict[tuple, tuple[int, int, tuple[int, ...]]] = {}  # see progress
+
+
+def _count_pairs(s: Session, user_id: int, item_ids: list[int], tolerance_s: float, control_hz: int,
+                 db: str) -> dict[tuple, tuple]:
+    """Per closed item: (pairs of me and another reviewer, pairs agreeing on every field,
+    pairs agreeing per field), by the queue's own rule (`fields.agreement`); kept in _PAIRS."""
+    # the item's control rate only, not its whole context (phases, events)
+    rows = s.execute(select(Review.item_id, Item.created_at, Review.reviewer_id, Review.values,
+                            Item.context["control_hz"].as_integer())
+                     .join(Item, Item.id == Review.item_id).where(Review.item_id.in_(item_ids))
+                     .order_by(Review.item_id, Review.id)).all()
+    by_item: dict[tuple, list] = {}
+    for item_id, created, reviewer_id, values, hz in rows:
+        by_item.setdefault((item_id, created), []).append((reviewer_id, values, control_hz if hz is None else hz))
+    if len(_PAIRS) > 500_000:
+        _PAIRS.clear()
+    out = {}
+    for (item_id, created), reviews in by_item.items():
+        mine = next(v for r, v, _ in reviews if r == user_id)
+        n = whole = 0
+        per_field = [0] * len(FIELDS)
+        for r, other, hz in reviews:
+            if r == user_id:
+                continue
+            _, disputed = agreement([mine, other], tolerance_s, hz)
+            n += 1
+            whole += not disputed
+            for j, f in enumerate(FIELDS):
+                per_field[j] += f not in disputed
+        out[(db, user_id, item_id, created, tolerance_s, control_hz)] = (n, whole, tuple(per_field))
+    _PAIRS.update(out)
+    return out
+
+
 def progress(s: Session, user: User, tolerance_s: float, control_hz: int = 20) -> dict:
     """One reviewer's own progress: decisions today, items left to them, and how often their
     values agreed with each other reviewer's on items that have closed (all K reviews in).
@@ -180,32 +221,30 @@ def progress(s: Session, user: User, tolerance_s: float, control_hz: int = 20) -
     done_today = s.scalar(select(func.count(Review.id)).where(Review.reviewer_id == user.id,
                                                               Review.created_at >= today)) or 0
     left = s.scalar(select(func.count(Item.id)).where(_open_to(user, t))) or 0
-    closed = select(Review.item_id).join(Item, Item.id == Review.item_id).where(
-        Review.reviewer_id == user.id, Item.status.not_in(COLLECTING), Item.n_reviews >= Item.required_reviews)
-    rows = s.execute(select(Review.item_id, Review.reviewer_id, Review.values, Item.context)
-                     .join(Item, Item.id == Review.item_id).where(Review.item_id.in_(closed))
-                     .order_by(Review.item_id, Review.id)).all()
-    by_item: dict[int, list] = {}
-    for item_id, reviewer_id, values, ctx in rows:
-        by_item.setdefault(item_id, []).append((reviewer_id, values, (ctx or {}).get("control_hz", control_hz)))
+    closed = s.execute(select(Item.id, Item.created_at).join(Review, Review.item_id == Item.id).where(
+        Review.reviewer_id == user.id, Item.status.not_in(COLLECTING), Item.n_reviews >= Item.required_reviews)).all()
+    # a closed item's reviews never change: its pair counts are computed once per process
+    # (keyed by the database and the item's creation time too), so this costs what the
+    # items closed since the last call cost, not the reviewer's whole day
+    db = s.get_bind().url.render_as_string(hide_password=True)
+    keys = [(db, user.id, item_id, created, tolerance_s, control_hz) for item_id, created in closed]
+    per_item = {k: _PAIRS.get(k) for k in keys}
+    todo = [k[2] for k, v in per_item.items() if v is None]
+    for i in range(0, len(todo), 500):
+        per_item.update(_count_pairs(s, user.id, todo[i:i + 500], tolerance_s, control_hz, db))
     pairs, whole = 0, 0
     per_field = dict.fromkeys(FIELDS, 0)
-    for reviews in by_item.values():
-        mine = next(v for r, v, _ in reviews if r == user.id)
-        for r, other, hz in reviews:
-            if r == user.id:
-                continue
-            _, disputed = agreement([mine, other], tolerance_s, hz)
-            pairs += 1
-            whole += not disputed
-            for f in FIELDS:
-                per_field[f] += f not in disputed
+    for n, w, by_field in per_item.values():
+        pairs += n
+        whole += w
+        for f, c in zip(FIELDS, by_field):
+            per_field[f] += c
     share = (lambda n: round(n / pairs, 4) if pairs else None)
     return {
         "done_today": done_today,
         "day_start": iso(today),
         "left": left,
-        "agreement": {"closed_items": len(by_item), "pairs": pairs, "all_fields": share(whole),
+        "agreement": {"closed_items": len(closed), "pairs": pairs, "all_fields": share(whole),
                       "by_field": {f: share(n) for f, n in per_field.items()}},
     }
 

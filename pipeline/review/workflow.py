@@ -21,6 +21,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from sqlalchemy import and_, delete, exists, func, select, update
+from sqlalchemy.engine import Engine
 from sqlalchemy.orm import Session
 
 from pipeline.review import audit
@@ -140,11 +141,11 @@ _last_sweep: dict[str, float] = {}  # database URL -> time of the last sweep
 SWEEP_EVERY_S = 5.0
 
 
-def _sweep_key(s: Session) -> str:
-    return s.get_bind().url.render_as_string(hide_password=True)
+def _sweep_key(s: Session | Engine) -> str:
+    return (s.get_bind() if isinstance(s, Session) else s).url.render_as_string(hide_password=True)
 
 
-def sweep_due(s: Session, t: float) -> bool:
+def sweep_due(s: Session | Engine, t: float) -> bool:
     return t - _last_sweep.get(_sweep_key(s), 0.0) >= SWEEP_EVERY_S
 
 

@@ -358,3 +358,33 @@ def test_item_page_fits_steps_on_the_control_grid_and_keeps_its_look(browser, se
         assert other_errors == []
         other.context.close()
     assert errors == []
+
+
+def test_adjudication_page_fits_without_scrolling(browser, server, engine, people, items):
+    # the hardest case: every field disputed (ann revises all four, bob accepts the model)
+    item = items[0]
+    for name, body in (("ann", {"decision": "revise", "fields": {
+            "fail_time_s": 0.8, "recovery_level": "L1", "failure_category": "grasp_failure",
+            "recovery_action": "Open the gripper, then grasp the bowl again from above"}}),
+            ("bob", {"decision": "accept"})):
+        r = httpx.post(f"{server.url}/api/items/{item}/review", headers={"Authorization": f"Bearer {people[name]}"},
+                       json={**body, "version": 0, "idempotency_key": f"{name}-fit"})
+        assert r.status_code == 200, r.text
+    with read_session(engine) as s:
+        assert len(s.get(Item, item).disputed) == 4
+    shots = os.environ.get("REVIEW_SCREENSHOTS")
+    panel = ["#compare", "#btn-adjudicate", "#rationale", "#exclude", "#adjudication-status", "#history summary",
+             "#marker-lane", "#event-lane", "#tracks", "#legend", "#ev-readout", "#video-main", "#video-wrist"]
+    for size in SIZES[:2]:
+        page, errors = open_page(browser, server, people["dan"], size, f"#/adjudicate/{item}")
+        page.wait_for_selector("#btn-adjudicate")
+        if shots:
+            page.wait_for_function(VIDEOS_STILL)
+            page.screenshot(path=f"{shots}/adjudication_all_disputed_{size[0]}x{size[1]}.png")
+        assert out_of_view(page, panel) == [], size
+        assert page.evaluate("document.scrollingElement.scrollHeight <= innerHeight"), size
+        side = page.evaluate("(() => { const s = document.querySelector('.side'); "
+                             "return [s.scrollHeight, s.clientHeight]; })()")
+        assert side[0] <= side[1], f"the right column scrolls at {size}: {side}"
+        assert errors == []
+        page.context.close()
