@@ -117,7 +117,8 @@ def build(cfg: Config, console: Console | None = None) -> list[ScenarioRow]:
         c = certs.get(ref.cache_key)
         if c is not None:
             rows[i] = rows[i].model_copy(update={"certified": c.certified, "certify_tries": c.tries,
-                                                 "certify_successes": c.successes})
+                                                 "certify_successes": c.successes,
+                                                 "certify_reason": c.reason})
 
     write_manifest(out / MANIFEST_NAME, rows)
     write_figure(rows, out / FIGURE)
