@@ -75,6 +75,13 @@ def write_figure(rows: list[ScenarioRow], path: Path) -> None:
     plt.close(fig)
 
 
+EXPERT_TEXT = {
+    "recovery": "The recovery expert (zero noise: it first restores the plan's preconditions, then runs\n"
+                "the task, and gives up with a reason when it cannot)",
+    "plain": "The plain scripted expert (zero noise, the stage-1 generator without its noise)",
+}
+
+
 def _uncertified(rows: list[ScenarioRow]) -> str:
     """Why scenes are not certified: counts per reason, then each scene."""
     bad = [r for r in rows if r.certified is False]
@@ -135,8 +142,7 @@ send a few close commands (or open ones) before the policy acts, as `recover eva
 
 ## Recoverability certificate
 
-The recovery expert (zero noise: it first restores the plan's preconditions, then runs
-the task, and gives up with a reason when it cannot) was run from each scene up to
+{EXPERT_TEXT[cfg.release.certify_expert]} was run from each scene up to
 {cfg.release.certify_tries} times (horizon {cfg.release.certify_horizon} steps); a success
 certifies the scene recoverable. Not certified is not a rejection; the column
 `certify_reason` of `scenarios.parquet` says why. Certified: {certified} of {attempted} attempted.
