@@ -147,7 +147,8 @@ class OpenpiPolicyConfig(_Strict):
 
 
 class PolicyConfig(_Strict):
-    kind: Literal["scripted", "openpi"] = "scripted"
+    # recovery: the zero-noise recovery expert (a reference for eval; it takes no settings)
+    kind: Literal["scripted", "openpi", "recovery"] = "scripted"
     name: str | None = None  # recorded with each episode; defaults to kind
     scripted: ScriptedPolicyConfig = ScriptedPolicyConfig()
     openpi: OpenpiPolicyConfig = OpenpiPolicyConfig()
@@ -290,7 +291,8 @@ class ReleaseConfig(_Strict):
 
 
 class EvalConfig(_Strict):
-    policies: list[PolicyConfig] = Field(default_factory=lambda: [PolicyConfig()])
+    # default: the clean scripted expert and the recovery expert, the two reference rows
+    policies: list[PolicyConfig] = Field(default_factory=lambda: [PolicyConfig(), PolicyConfig(kind="recovery")])
     trials_per_condition: int = Field(default=5, ge=1)
     gripper_conditions: list[Literal["open", "closed"]] = Field(default_factory=lambda: ["open", "closed"])
     max_offset_m: float = Field(default=0.02, ge=0.0)

@@ -19,7 +19,9 @@ def _config(tmp_path: Path, fixture_run, **eval_overrides) -> Path:
     raw = {
         "run": {"name": "evaltest", "output_dir": str(tmp_path / "run"), "seed": 0},
         "executor": {"kind": "local", "workers": 1},
-        "eval": {"scenes_dir": str(fixture_run.scenes), "stage1_dir": str(fixture_run.stage1),
+        # the plain expert only (the default adds the recovery expert: see the reference test)
+        "eval": {"policies": [{"kind": "scripted"}],
+                 "scenes_dir": str(fixture_run.scenes), "stage1_dir": str(fixture_run.stage1),
                  "trials_per_condition": 2, "horizon": 6, "gripper_settle_steps": 20} | eval_overrides,
     }
     path = tmp_path / "eval.yaml"
