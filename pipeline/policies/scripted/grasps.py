@@ -55,9 +55,11 @@ def _blocked(scene: Scene, pos: np.ndarray, yaw: float, top: float) -> float:
     return worst
 
 
-def plan_grasp(scene: Scene, obj: str, dest: np.ndarray | None = None) -> Grasp:
+def plan_grasp(scene: Scene, obj: str, dest: np.ndarray | None = None, choice: int = 0) -> Grasp:
     """`dest` (x, y, support top) is where the object's body goes next: the hand must fit
-    there too, so rim sides that would put the hand into a wall at the target lose."""
+    there too, so rim sides that would put the hand into a wall at the target lose.
+    `choice` k > 0 takes the k-th best candidate instead of the best (a retry after a
+    failed grasp tries another yaw or rim side, not the same one again)."""
     box = scene.box(obj)
     corners = scene.env.object_corners(obj)
     centre = box.centre
@@ -67,7 +69,7 @@ def plan_grasp(scene: Scene, obj: str, dest: np.ndarray | None = None) -> Grasp:
     widths = [(float(np.ptp(corners[:, :2] @ closing_axis(y)[:2])), y) for y in YAWS]
     fitting = [(w + 0.02 * abs(y), y) for w, y in widths if w < MAX_SPAN]
     if fitting:
-        yaw = min(fitting)[1]
+        yaw = sorted(fitting)[choice % len(fitting)][1]
         mid = corners[:, :2] @ closing_axis(yaw)[:2]
         z = box.lo[2] + (min(max(0.5 * h, 0.015), h - 0.02) if h > 0.03 else 0.5 * h)
         pos = np.array([centre[0], centre[1], max(z, floor)])
@@ -75,7 +77,7 @@ def plan_grasp(scene: Scene, obj: str, dest: np.ndarray | None = None) -> Grasp:
         pos[:2] += closing_axis(yaw)[:2] * ((mid.max() + mid.min()) / 2 - centre[:2] @ closing_axis(yaw)[:2])
         return Grasp(pos=pos, yaw=float(yaw), rim=False)
     # rim grasp: radial direction whose outer finger lands clear
-    best = None
+    ranked = []
     for theta in np.linspace(-np.pi, np.pi, 16, endpoint=False):
         u = np.array([np.cos(theta), np.sin(theta), 0.0])
         reach = float(np.max((corners - centre) @ u))
@@ -90,6 +92,6 @@ def plan_grasp(scene: Scene, obj: str, dest: np.ndarray | None = None) -> Grasp:
             there[2] = p[2] - box.lo[2] + dest[2] + 0.015
             block += _blocked(scene, there, yaw, there[2])
         score = block * 10 + 0.01 * abs(yaw)
-        if best is None or score < best[0]:
-            best = (score, Grasp(pos=p, yaw=float(yaw), rim=True))
-    return best[1]
+        ranked.append((score, len(ranked), Grasp(pos=p, yaw=float(yaw), rim=True)))
+    ranked.sort(key=lambda r: r[:2])
+    return ranked[choice % len(ranked)][2]

@@ -77,14 +77,16 @@ def free_hand(ctx: Ctx) -> Plan:
         yield ctx.move(eef + [0, 0, 0.06], tol=0.02, label="back_off")
 
 
-def grasp(ctx: Ctx, obj: str, dest: np.ndarray | None = None) -> Plan:
+def grasp(ctx: Ctx, obj: str, dest: np.ndarray | None = None, choice: int = 0, hover_m: float = 0.08) -> Plan:
+    """Reach above the object, descend, close, lift. `choice` / `hover_m`: another grasp
+    candidate and a higher hover (the recovery expert's retries)."""
     s = ctx.scene
-    g = plan_grasp(s, obj, dest)
+    g = plan_grasp(s, obj, dest, choice)
     offset = ctx.noise.grasp_offset()
     ctx.note(grasp_offset=offset)
     pos = g.pos + offset
     lift_z = s.path_clearance(s.eef(), pos, 0.06, {obj}) + HAND_CLEARANCE
-    hover = pos + [0, 0, 0.08]
+    hover = pos + [0, 0, hover_m]
     yield from travel(ctx, hover, g.yaw, -1.0, lift_z)
     yield ctx.move(hover, yaw=g.yaw, tol=0.012, label="hover")
     t = ctx.noise.timing()
@@ -116,6 +118,17 @@ def destination(ctx: Ctx, obj: str, target: str) -> np.ndarray:
 
 
 def place(ctx: Ctx, obj: str, target: str) -> Plan:
+    env = ctx.scene.env
+    below = np.inf
+    if env.is_region(target):
+        r = env.region(target)
+        below = r["pos"][2] + float(np.abs(r["mat"] @ r["size"])[2]) + 0.03
+    yield from place_at(ctx, obj, place_xy(ctx, obj, target), below)
+
+
+def place_at(ctx: Ctx, obj: str, xy: np.ndarray, below: float = np.inf) -> Plan:
+    """Carry the held object so its body comes down at `xy` on whatever supports it there
+    (ignoring boxes whose top is at or above `below`), release, retreat."""
     s = ctx.scene
     env = s.env
     eef = s.eef()
@@ -125,12 +138,8 @@ def place(ctx: Ctx, obj: str, target: str) -> Plan:
     bottom = eef[2] - box.lo[2]  # grip site above the object's bottom
     radius = 0.6 * float(min(box.size[0], box.size[1])) / 2
     offset_xy = ctx.noise.place_offset()[:2]
-    dest = place_xy(ctx, obj, target) + offset_xy
+    dest = np.asarray(xy, dtype=float)[:2] + offset_xy
     foot = dest + (box.centre[:2] - body[:2])
-    below = np.inf
-    if env.is_region(target):
-        r = env.region(target)
-        below = r["pos"][2] + float(np.abs(r["mat"] @ r["size"])[2]) + 0.03
     support = s.support_top(foot, radius, {obj}, below=below)
     offset_z = abs(ctx.noise.place_offset()[2])
     ctx.note(place_offset=[offset_xy[0], offset_xy[1], offset_z])
