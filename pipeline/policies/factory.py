@@ -18,9 +18,9 @@ def make_policy(cfg: PolicyConfig) -> Policy:
 
         return make_scripted_policy(cfg.scripted, name=cfg.name)
     if cfg.kind == "recovery":
-        from pipeline.policies.recovery_expert import RecoveryExpertPolicy
+        from pipeline.policies.scripted.recovery import RecoveryExpert
 
-        return RecoveryExpertPolicy(name=cfg.name)
+        return RecoveryExpert(variation=0.0, name=cfg.name or "recovery")
     if cfg.kind == "openpi":
         from pipeline.policies.openpi_policy import OpenpiPolicy
 
