@@ -115,9 +115,12 @@ def demos(config: Path = CONFIG, dry_run: bool = DRY) -> None:
 
 
 @app.command("export-lerobot")
-def export_lerobot(config: Path = CONFIG, out: Path = typer.Option(None, help="output folder")) -> None:
+def export_lerobot(config: Path = CONFIG, out: Path = typer.Option(None, help="output folder"),
+                   dataset: list[str] = typer.Option(None, "--dataset", "-d",
+                                                     help="rollouts | pre_failure_histories | recoveries (default: all)")
+                   ) -> None:
     """Export rollouts, pre-failure histories and recovery demos in the LeRobot v2.1 layout."""
-    _call("pipeline.release.lerobot_export:run", _load(config), out)
+    _call("pipeline.release.lerobot_export:run", _load(config), out, dataset or None)
 
 
 @app.command("eval")

@@ -163,16 +163,24 @@ def export_dataset(episodes: list[ExportEpisode], root: Path, work: Path, size: 
     return int(starts[-1])
 
 
-def run(cfg: Config, out: Path | None = None) -> Path:
+DATASETS = ("rollouts", "pre_failure_histories", "recoveries")
+
+
+def run(cfg: Config, out: Path | None = None, only: list[str] | None = None) -> Path:
+    """Export every dataset, or those named in `only`."""
     from pipeline.release.build import release_dir
 
     out = Path(out or cfg.release.lerobot_dir or cfg.out / "lerobot")
     size = cfg.release.lerobot_image_size
     if size % 2:
         raise ConfigError(f"release.lerobot_image_size must be even for yuv420p video, got {size}")
-    datasets = {"rollouts": rollout_episodes(cfg),
-                "pre_failure_histories": history_episodes(cfg, release_dir(cfg) / MANIFEST_NAME),
-                "recoveries": recovery_episodes(cfg, release_dir(cfg))}
+    bad = sorted(set(only or []) - set(DATASETS))
+    if bad:
+        raise ConfigError(f"export-lerobot: unknown dataset(s) {bad}; choose from {list(DATASETS)}")
+    sources = {"rollouts": lambda: rollout_episodes(cfg),
+               "pre_failure_histories": lambda: history_episodes(cfg, release_dir(cfg) / MANIFEST_NAME),
+               "recoveries": lambda: recovery_episodes(cfg, release_dir(cfg))}
+    datasets = {name: sources[name]() for name in DATASETS if not only or name in only}
     console = Console()
     with Progress(console=console, transient=True) as progress, EnvCache(capacity=1) as envs:
         for name, episodes in datasets.items():
