@@ -221,6 +221,10 @@ def run(cfg: Config, console: Console | None = None) -> Path:
                 try:
                     env = envs.get(scene_task(row.suite, row.task, row.instruction, release / row.bddl_path))
                     state = np.load(release / row.state_path, allow_pickle=False)
+                    if not renders.alive:  # fail what it held (those scenes are redone), take a fresh one
+                        collect(wait=False)
+                        renders.close()
+                        renders = RenderProcess()
                     renders.prepare(env, v.resolution, v.quality)
                     waiting[unit] = [None, 0, []]
 
