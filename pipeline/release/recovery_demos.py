@@ -39,6 +39,7 @@ from rich.progress import Progress
 from pipeline import SCHEMA_VERSION
 from pipeline.atomic import Completions, write_text, write_with
 from pipeline.config import Config
+from pipeline.errors import FatalError
 from pipeline.release.experts import attempt, recovery_expert
 from pipeline.release.manifest import MANIFEST_NAME, ScenarioRow, read_manifest
 from pipeline.release.scene_physics import restore_scene, scene_task
@@ -180,7 +181,12 @@ def run(cfg: Config, console: Console | None = None) -> Path:
 
     console = console or Console()
     release = release_dir(cfg)
-    rows = read_manifest(release / MANIFEST_NAME)
+    try:
+        rows = read_manifest(release / MANIFEST_NAME)
+    except FileNotFoundError:
+        raise FatalError(f"{release / MANIFEST_NAME}: no release to record demos from; run `recover release` first") from None
+    except ValueError as e:
+        raise FatalError(str(e)) from None
     root = recoveries_dir(cfg)
     done = Completions(root)
     v = cfg.stage1.video
