@@ -20,6 +20,7 @@ MAX_SPAN = 0.068  # widest object (along the closing axis) grasped whole
 RIM_INSET = 0.012  # grasp point inside the outer rim edge
 RIM_DEPTH = 0.02  # grip site below the rim top
 FINGER_REACH = 0.047  # open fingertip centre from the grip site
+LONG_M = 0.12  # horizontal length beyond which a whole-object grasp goes to the centre of mass
 YAWS = np.linspace(-np.pi / 2, np.pi / 2, 12, endpoint=False)
 
 
@@ -75,6 +76,12 @@ def plan_grasp(scene: Scene, obj: str, dest: np.ndarray | None = None, choice: i
         pos = np.array([centre[0], centre[1], max(z, floor)])
         # centre between the extreme faces along the closing axis
         pos[:2] += closing_axis(yaw)[:2] * ((mid.max() + mid.min()) / 2 - centre[:2] @ closing_axis(yaw)[:2])
+        # a long object lying on its side (a toppled bottle): grasp it at its centre of
+        # mass along its length, or it pivots out of the fingers when lifted
+        along = np.array([closing_axis(yaw)[1], -closing_axis(yaw)[0]])
+        if float(np.ptp(corners[:, :2] @ along)) > LONG_M:
+            com = scene.env.object_com(obj)[:2]
+            pos[:2] += along * ((com - pos[:2]) @ along)
         return Grasp(pos=pos, yaw=float(yaw), rim=False)
     # rim grasp: radial direction whose outer finger lands clear
     ranked = []

@@ -103,27 +103,30 @@ def place_xy(ctx: Ctx, obj: str, target: str) -> np.ndarray:
     return ctx.scene.pos(target)[:2].copy()
 
 
+def support_ceiling(env, target: str) -> float:
+    """Boxes whose top is at or above this height cannot support an object put `in`/`on`
+    `target`: for a region, a little above its top; for a region inside a drawer, its top
+    itself (the cabinet's own top sits just above the top drawer's region)."""
+    if not env.is_region(target):
+        return np.inf
+    r = env.region(target)
+    top = r["pos"][2] + float(np.abs(r["mat"] @ r["size"])[2])
+    return top if r["joints"] else top + 0.03
+
+
 def destination(ctx: Ctx, obj: str, target: str) -> np.ndarray:
     """(x, y, support top) where the object's body should come to rest (no noise)."""
     s = ctx.scene
     box = s.box(obj)
     dest = place_xy(ctx, obj, target)
     foot = dest + (box.centre[:2] - s.env.object_pose(obj)[0][:2])
-    below = np.inf
-    if s.env.is_region(target):
-        r = s.env.region(target)
-        below = r["pos"][2] + float(np.abs(r["mat"] @ r["size"])[2]) + 0.03
+    below = support_ceiling(s.env, target)
     radius = 0.6 * float(min(box.size[0], box.size[1])) / 2
     return np.array([dest[0], dest[1], s.support_top(foot, radius, {obj}, below=below)])
 
 
 def place(ctx: Ctx, obj: str, target: str) -> Plan:
-    env = ctx.scene.env
-    below = np.inf
-    if env.is_region(target):
-        r = env.region(target)
-        below = r["pos"][2] + float(np.abs(r["mat"] @ r["size"])[2]) + 0.03
-    yield from place_at(ctx, obj, place_xy(ctx, obj, target), below)
+    yield from place_at(ctx, obj, place_xy(ctx, obj, target), support_ceiling(ctx.scene.env, target))
 
 
 def place_at(ctx: Ctx, obj: str, xy: np.ndarray, below: float = np.inf) -> Plan:

@@ -31,10 +31,12 @@ def hopeless(scene: Scene, objects: list[str]) -> tuple[GiveUpReason, str] | Non
     """A goal object fell off the table or lies beyond reach: the task cannot be finished."""
     table = scene.table_height()
     base = robot_base(scene)
-    for o in objects:
+    for o in objects:  # off the table first: a fallen object is usually also far away
         p = scene.env.object_pose(o)[0]
         if scene.box(o).hi[2] < table - OFF_TABLE_M:
             return GiveUpReason.OBJECT_OFF_TABLE, f"{o} at z {p[2]:.2f}, table top {table:.2f}"
+    for o in objects:
+        p = scene.env.object_pose(o)[0]
         if float(np.linalg.norm(p[:2] - base[:2])) > REACH_M:
             return GiveUpReason.UNREACHABLE, f"{o} {np.linalg.norm(p[:2] - base[:2]):.2f} m from the robot base"
     return None
@@ -70,13 +72,13 @@ def _overlap(a: np.ndarray, b: np.ndarray, pad: float = 0.0) -> bool:
     return bool(np.all(a[0, :2] - pad <= b[1, :2]) and np.all(b[0, :2] - pad <= a[1, :2]))
 
 
-def blockers(scene: Scene, obj: str, dest_xy: np.ndarray, keep: set[str]) -> list[str]:
-    """Movable objects in the way of moving `obj` to `dest_xy`: lying on top of `obj`, or
-    occupying the footprint it needs at the destination. `keep` (goal objects, the target)
-    are never moved aside."""
+def blockers(scene: Scene, obj: str, dest: np.ndarray, keep: set[str]) -> list[str]:
+    """Movable objects in the way of moving `obj` to `dest` (x, y, support top): lying on
+    top of `obj`, or standing on the support in the footprint it needs there. `keep` (goal
+    objects, the target) are never moved aside."""
     box = scene.box(obj)
     half = box.size[:2] / 2
-    foot = np.array([[*(dest_xy - half * 0.8), 0.0], [*(dest_xy + half * 0.8), 0.0]])
+    foot = np.array([[*(dest[:2] - half * 0.8), 0.0], [*(dest[:2] + half * 0.8), 0.0]])
     on_top = np.array([box.lo, box.hi])
     out = []
     for o in scene.env.object_names:
@@ -86,7 +88,7 @@ def blockers(scene: Scene, obj: str, dest_xy: np.ndarray, keep: set[str]) -> lis
         ob = np.array([b.lo, b.hi])
         if _overlap(ob, on_top) and b.lo[2] > box.hi[2] - 0.02:
             out.append(o)
-        elif _overlap(ob, foot) and b.hi[2] > scene.table_height() + 0.01:
+        elif _overlap(ob, foot) and b.lo[2] > dest[2] - 0.04 and b.hi[2] > dest[2] + 0.01:
             out.append(o)
     return out
 

@@ -13,6 +13,7 @@ A subgoal that failed MAX_TRIES times, or a budget of steps spent, ends with a r
 
 from __future__ import annotations
 
+import os
 from collections import Counter
 from collections.abc import Callable
 
@@ -29,6 +30,11 @@ from pipeline.policies.scripted.skills import Ctx, Plan, destination, free_hand
 
 MAX_TRIES = 4  # attempts per subgoal (each one different)
 MAX_ASIDE = 2  # times one obstruction is moved aside
+
+
+def _debug(*a) -> None:
+    if os.environ.get("RECOVERY_DEBUG"):
+        print("[recovery]", *a, flush=True)
 
 
 def next_subgoal(ctx: Ctx, steps: list[tuple[str, ...]], goal: list[tuple[str, ...]]) -> tuple[str, ...] | None:
@@ -79,11 +85,13 @@ def recover(ctx: Ctx, now: Callable[[], int], budget: int | None) -> Plan:
         yield from back_out(ctx)
         if sub[0] in ("on", "in") and held != sub[1]:
             dest = destination(ctx, sub[1], sub[2])
-            block = [b for b in checks.blockers(s, sub[1], dest[:2], keep) if aside[b] < MAX_ASIDE]
+            block = [b for b in checks.blockers(s, sub[1], dest, keep) if aside[b] < MAX_ASIDE]
             if block:
+                _debug("aside", block)
                 aside[block[0]] += 1
                 yield from put_aside(ctx, block[0], aside[block[0]] - 1)
                 continue
+        _debug("subgoal", sub, "try", tries[sub], "held", held)
         if tries[sub] >= MAX_TRIES:
             raise GiveUp(GiveUpReason.RETRIES_EXHAUSTED, f"{' '.join(sub)} failed {MAX_TRIES} times")
         if isinstance(ctx.noise, RetryNoise):
