@@ -62,7 +62,8 @@ def recover(ctx: Ctx, now: Callable[[], int], budget: int | None) -> Plan:
     steps = order_goal(goal, lambda region: articulated.openable(s.env, region))
     tries: Counter = Counter()
     aside: Counter = Counter()
-    keep = {n for c in goal for n in c[1:]}
+    keep = {n for c in goal for n in c[1:]}  # never moved aside: goal objects, targets and
+    keep |= {s.env.region(n)["parent"] for n in list(keep) if s.env.is_region(n)}  # their owners
     while not s.env.goal_satisfied():
         if budget is not None and now() >= budget:
             raise GiveUp(GiveUpReason.TIMEOUT, f"step budget {budget} spent")
