@@ -35,13 +35,14 @@ def closing_axis(yaw: float) -> np.ndarray:
     return np.array([-np.sin(yaw), np.cos(yaw), 0.0])
 
 
-def _blocked(scene: Scene, pos: np.ndarray, yaw: float, top: float) -> float:
+def _blocked(scene: Scene, pos: np.ndarray, yaw: float, top: float, skip_tips: bool = False) -> float:
     """How far (m) anything sticks up into the hand's way when the grip site is at `pos`:
-    under both fingertips and under the palm's ends (about 6 cm above the tips)."""
+    under both fingertips (unless `skip_tips`) and under the palm's ends (about 6 cm above
+    the tips)."""
     ax = closing_axis(yaw)
     side = np.array([-ax[1], ax[0], 0.0])
     tip_z = pos[2] - 0.012
-    probes = [(pos + s * ax * FINGER_REACH, tip_z) for s in (-1, 1)]
+    probes = [] if skip_tips else [(pos + s * ax * FINGER_REACH, tip_z) for s in (-1, 1)]
     # the hand's collision box reaches ~0.10 m along the closing axis, from ~5 cm above the site
     probes += [
         (pos + s * ax * r + t * side * 0.03, pos[2] + 0.05) for s in (-1, 1) for t in (-1, 1) for r in (0.05, 0.1)
@@ -68,9 +69,10 @@ def plan_grasp(scene: Scene, obj: str, dest: np.ndarray | None = None, choice: i
     floor = box.lo[2] + TABLE_MARGIN
     # whole-object grasp: narrowest closing direction that fits
     widths = [(float(np.ptp(corners[:, :2] @ closing_axis(y)[:2])), y) for y in YAWS]
-    fitting = [(w + 0.02 * abs(y), y) for w, y in widths if w < MAX_SPAN]
-    if fitting:
-        yaw = sorted(fitting)[choice % len(fitting)][1]
+    fitting = []
+    for w, yaw in widths:
+        if w >= MAX_SPAN:
+            continue
         mid = corners[:, :2] @ closing_axis(yaw)[:2]
         z = box.lo[2] + (min(max(0.5 * h, 0.015), h - 0.02) if h > 0.03 else 0.5 * h)
         pos = np.array([centre[0], centre[1], max(z, floor)])
@@ -82,7 +84,12 @@ def plan_grasp(scene: Scene, obj: str, dest: np.ndarray | None = None, choice: i
         if float(np.ptp(corners[:, :2] @ along)) > LONG_M:
             com = scene.env.object_com(obj)[:2]
             pos[:2] += along * ((com - pos[:2]) @ along)
-        return Grasp(pos=pos, yaw=float(yaw), rim=False)
+        # a neighbour under the palm's ends (it reaches ~10 cm along the closing axis)
+        # would stop the descent: such yaws lose
+        block = _blocked(scene, pos, yaw, box.hi[2], skip_tips=True)
+        fitting.append((w + 0.02 * abs(yaw) + 10 * block, len(fitting), Grasp(pos=pos, yaw=float(yaw), rim=False)))
+    if fitting:
+        return sorted(fitting, key=lambda f: f[:2])[choice % len(fitting)][2]
     # rim grasp: radial direction whose outer finger lands clear
     ranked = []
     for theta in np.linspace(-np.pi, np.pi, 16, endpoint=False):

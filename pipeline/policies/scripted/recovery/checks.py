@@ -93,6 +93,27 @@ def blockers(scene: Scene, obj: str, dest: np.ndarray, keep: set[str]) -> list[s
     return out
 
 
+def grasp_blockers(scene: Scene, obj: str, grasp, keep: set[str]) -> list[str]:
+    """Movable objects standing where the palm's ends go down when grasping `obj` with
+    `grasp` (the palm reaches ~10 cm either way along the closing axis, ~5 cm above the
+    grip site): the best grasp of a flat box next to a tall carton is such a case."""
+    from pipeline.policies.scripted.grasps import closing_axis
+
+    ax = closing_axis(grasp.yaw)
+    side = np.array([-ax[1], ax[0], 0.0])
+    points = [grasp.pos + sg * ax * r + t * side * 0.03 for sg in (-1, 1) for r in (0.05, 0.1) for t in (-1, 1)]
+    out = []
+    for o in scene.env.object_names:
+        if o == obj or o in keep:
+            continue
+        b = scene.box(o)
+        if b.hi[2] < grasp.pos[2] + 0.05:
+            continue
+        if any(np.all(b.lo[:2] - 0.005 <= p[:2]) and np.all(p[:2] <= b.hi[:2] + 0.005) for p in points):
+            out.append(o)
+    return out
+
+
 def free_spot(scene: Scene, obj: str, avoid: list[np.ndarray]) -> np.ndarray | None:
     """A table spot (xy) where `obj` can stand without touching anything, near the hand,
     away from the points in `avoid` (goal targets), inside the comfortable region."""
@@ -103,13 +124,14 @@ def free_spot(scene: Scene, obj: str, avoid: list[np.ndarray]) -> np.ndarray | N
     eef = scene.eef()[:2]
     boxes = [b for _, b in scene.obstacle_boxes({obj}) if b[1, 2] > table + 0.005]
     best = None
-    for x in np.arange(0.3, 0.8, 0.03):
+    home = base + HOME_XY
+    for x in np.arange(0.3, 0.65, 0.03):  # near the robot: far spots are slow to reach
         for y in np.arange(-0.3, 0.301, 0.03):
             xy = base + [x, y]
             sq = np.array([[*(xy - r), 0.0], [*(xy + r), 0.0]])
             if any(_overlap(b, sq) for b in boxes):
                 continue
-            cost = float(np.linalg.norm(xy - eef))
+            cost = float(np.linalg.norm(xy - eef)) + float(np.linalg.norm(xy - home))
             cost += sum(max(0.0, 0.2 - float(np.linalg.norm(xy - a[:2]))) * 5 for a in avoid)
             if best is None or cost < best[0]:
                 best = (cost, xy)

@@ -18,6 +18,7 @@ from collections import Counter
 from collections.abc import Callable
 
 from pipeline.policies.scripted import articulated
+from pipeline.policies.scripted.grasps import plan_grasp
 from pipeline.policies.scripted.planner import order_goal
 from pipeline.policies.scripted.recovery import checks
 from pipeline.policies.scripted.recovery.back_out import back_out
@@ -29,7 +30,8 @@ from pipeline.policies.scripted.recovery.variation import RetryNoise
 from pipeline.policies.scripted.skills import Ctx, Plan, destination, free_hand
 
 MAX_TRIES = 4  # attempts per subgoal (each one different)
-MAX_ASIDE = 2  # times one obstruction is moved aside
+MAX_ASIDE = 2
+FLAT_M = 0.04  # objects lower than this are grasped with the palm near the table  # times one obstruction is moved aside
 
 
 def _debug(*a) -> None:
@@ -86,7 +88,12 @@ def recover(ctx: Ctx, now: Callable[[], int], budget: int | None) -> Plan:
         yield from back_out(ctx)
         if sub[0] in ("on", "in") and held != sub[1]:
             dest = destination(ctx, sub[1], sub[2])
-            block = [b for b in checks.blockers(s, sub[1], dest, keep) if aside[b] < MAX_ASIDE]
+            in_way = checks.blockers(s, sub[1], dest, keep)
+            # whatever stands where the palm goes down: after a failed grasp, or at once for
+            # a flat object (the palm then comes down low, beside its neighbours)
+            if tries[sub] > 0 or s.box(sub[1]).size[2] < FLAT_M:
+                in_way += checks.grasp_blockers(s, sub[1], plan_grasp(s, sub[1], dest, tries[sub]), keep)
+            block = [b for b in in_way if aside[b] < MAX_ASIDE]
             if block:
                 _debug("aside", block)
                 aside[block[0]] += 1
