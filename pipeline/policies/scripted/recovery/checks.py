@@ -80,15 +80,16 @@ def blockers(scene: Scene, obj: str, dest: np.ndarray, keep: set[str]) -> list[s
     half = box.size[:2] / 2
     foot = np.array([[*(dest[:2] - half * 0.8), 0.0], [*(dest[:2] + half * 0.8), 0.0]])
     on_top = np.array([box.lo, box.hi])
+    loose = {o for o in scene.env.object_names if o != obj and o not in keep}
+    # the support itself, without loose objects lying on it (`dest` may stand on them)
+    support = scene.support_top(dest[:2], 0.6 * float(min(half)), loose | {obj}, below=dest[2] + 0.005)
     out = []
-    for o in scene.env.object_names:
-        if o == obj or o in keep:
-            continue
+    for o in sorted(loose):
         b = scene.box(o)
         ob = np.array([b.lo, b.hi])
         if _overlap(ob, on_top) and b.lo[2] > box.hi[2] - 0.02:
             out.append(o)
-        elif _overlap(ob, foot) and b.lo[2] > dest[2] - 0.04 and b.hi[2] > dest[2] + 0.01:
+        elif _overlap(ob, foot) and b.lo[2] > support - 0.04 and b.hi[2] > support + 0.005:
             out.append(o)
     return out
 
