@@ -259,9 +259,9 @@ class SimEnv:
             out.append(d.geom_xpos[g] + local @ rot.T)
         return np.concatenate(out) if out else np.empty((0, 3))
 
-    def ray_down(self, xy: np.ndarray, z_from: float, z_to: float) -> float | None:
+    def ray_down(self, xy: np.ndarray, z_from: float, z_to: float, ignore: str | None = None) -> float | None:
         """Height of the first non-robot collision surface straight below (xy, z_from), or
-        None when nothing lies above `z_to`."""
+        None when nothing lies above `z_to`; `ignore` names an object to see through too."""
         import mujoco
 
         m = self.env.sim.model._model
@@ -273,7 +273,7 @@ class SimEnv:
             dist = mujoco.mj_ray(m, d, np.array([xy[0], xy[1], z]), np.array([0.0, 0.0, -1.0]), groups, 1, -1, geom)
             if dist < 0 or z - dist < z_to:
                 return None
-            if self._owner[m.geom_bodyid[geom[0]]] != "robot":
+            if self._owner[m.geom_bodyid[geom[0]]] not in ("robot", ignore):
                 return z - dist
             z = z - dist - 1e-4  # passed through the robot's own geometry: look further down
         return None

@@ -99,8 +99,28 @@ def grasp(ctx: Ctx, obj: str, dest: np.ndarray | None = None, choice: int = 0, h
 
 
 def place_xy(ctx: Ctx, obj: str, target: str) -> np.ndarray:
-    """Where the object's body should end up (xy): on an object's body or a region's centre."""
-    return ctx.scene.pos(target)[:2].copy()
+    """Where the object's body should end up (xy): on an object's body or a region's centre;
+    in a drawer, the point nearest its centre with open sky above the object's footprint
+    (an open bottom drawer lies partly under the drawers above it)."""
+    s = ctx.scene
+    xy = s.pos(target)[:2].copy()
+    if not (s.env.is_region(target) and s.env.region(target)["joints"]):
+        return xy
+    r = s.env.region(target)
+    half = np.abs(r["mat"]) @ r["size"]
+    top = r["pos"][2] + half[2]
+    rad = 0.4 * float(min(s.box(obj).size[:2]))
+    best = None
+    for fx in np.linspace(-0.8, 0.8, 9):
+        for fy in np.linspace(-0.8, 0.8, 9):
+            p = r["pos"][:2] + half[:2] * [fx, fy]
+            probes = [p + d for d in ([0, 0], [rad, 0], [-rad, 0], [0, rad], [0, -rad])]
+            if any((h := s.env.ray_down(q, top + 0.5, top, ignore=obj)) is not None and h > top for q in probes):
+                continue
+            d = float(np.linalg.norm(p - xy))
+            if best is None or d < best[0]:
+                best = (d, p)
+    return xy if best is None else best[1]
 
 
 def support_ceiling(env, target: str) -> float:
