@@ -21,6 +21,8 @@ RIM_INSET = 0.012  # grasp point inside the outer rim edge
 RIM_DEPTH = 0.02  # grip site below the rim top
 FINGER_REACH = 0.047  # open fingertip centre from the grip site
 LONG_M = 0.12  # horizontal length beyond which a whole-object grasp goes to the centre of mass
+TALL_M = 0.11  # objects taller than this may be carried by a handle
+HANDLE_THIN_M, HANDLE_OUT_M = 0.016, 0.055  # a handle part: thinner than this, this far out
 YAWS = np.linspace(-np.pi / 2, np.pi / 2, 12, endpoint=False)
 
 
@@ -57,6 +59,30 @@ def _blocked(scene: Scene, pos: np.ndarray, yaw: float, top: float, skip_tips: b
     return worst
 
 
+def handle_grasp(scene: Scene, obj: str) -> Grasp | None:
+    """A tall object with a thin handle sticking out of its body (a moka pot): grasp the
+    handle across its thin side, at mid-height. Its top edge (what a rim grasp finds) slips."""
+    box = scene.box(obj)
+    if box.size[2] < TALL_M:
+        return None
+    com = scene.env.object_com(obj)
+    boxes = scene.env.object_boxes(obj)
+    size = boxes[:, 1] - boxes[:, 0]
+    centre = (boxes[:, 0] + boxes[:, 1]) / 2
+    out = np.linalg.norm(centre[:, :2] - com[:2], axis=1)
+    thin = (size[:, :2].min(axis=1) < HANDLE_THIN_M) & (out > HANDLE_OUT_M)
+    if thin.sum() < 2:
+        return None
+    far = int(np.argmax(np.where(thin, out, -1.0)))
+    side = centre[far, :2] - com[:2]
+    parts = boxes[thin & ((centre[:, :2] - com[:2]) @ side > 0)]
+    lo, hi = parts[:, 0].min(axis=0), parts[:, 1].max(axis=0)
+    thin_axis = int(np.argmin((hi - lo)[:2]))  # fingers close along it
+    yaw = np.pi / 2 if thin_axis == 0 else 0.0
+    pos = (lo + hi) / 2
+    return Grasp(pos=pos, yaw=float(yaw), rim=False)
+
+
 def plan_grasp(scene: Scene, obj: str, dest: np.ndarray | None = None, choice: int = 0) -> Grasp:
     """`dest` (x, y, support top) is where the object's body goes next: the hand must fit
     there too, so rim sides that would put the hand into a wall at the target lose.
@@ -90,6 +116,9 @@ def plan_grasp(scene: Scene, obj: str, dest: np.ndarray | None = None, choice: i
         fitting.append((w + 0.02 * abs(yaw) + 10 * block, len(fitting), Grasp(pos=pos, yaw=float(yaw), rim=False)))
     if fitting:
         return sorted(fitting, key=lambda f: f[:2])[choice % len(fitting)][2]
+    handle = handle_grasp(scene, obj)
+    if handle is not None and choice % 2 == 0:
+        return handle
     # rim grasp: radial direction whose outer finger lands clear
     ranked = []
     for theta in np.linspace(-np.pi, np.pi, 16, endpoint=False):

@@ -104,20 +104,32 @@ def place_xy(ctx: Ctx, obj: str, target: str) -> np.ndarray:
     (an open bottom drawer lies partly under the drawers above it)."""
     s = ctx.scene
     xy = s.pos(target)[:2].copy()
-    if not (s.env.is_region(target) and s.env.region(target)["joints"]):
+    if not s.env.is_region(target):
         return xy
     r = s.env.region(target)
+    drawer = bool(r["joints"])
     half = np.abs(r["mat"]) @ r["size"]
     top = r["pos"][2] + half[2]
-    rad = 0.4 * float(min(s.box(obj).size[:2]))
+    size = s.box(obj).size[:2]
+    rad = 0.4 * float(min(size))
+    # other objects already standing in the region (the second moka pot on a stove)
+    reach = 0.5 * float(max(size))  # objects within this of the region count
+    others = [s.box(o) for o in s.env.object_names if o != obj]
+    others = [b for b in others if np.all(b.hi[:2] > xy - half[:2] - reach) and np.all(b.lo[:2] < xy + half[:2] + reach)]
+    if not drawer and not others:
+        return xy
     best = None
-    for fx in np.linspace(-0.8, 0.8, 9):
-        for fy in np.linspace(-0.8, 0.8, 9):
+    for fx in np.linspace(-1.0, 1.0, 11):
+        for fy in np.linspace(-1.0, 1.0, 11):
             p = r["pos"][:2] + half[:2] * [fx, fy]
+            # overlap (m^2) of the footprint with objects already there: least wins
+            lo, hi = p - size / 2, p + size / 2
+            crowd = sum(float(np.prod(np.clip(np.minimum(hi, b.hi[:2]) - np.maximum(lo, b.lo[:2]), 0, None)))
+                        for b in others)
             probes = [p + d for d in ([0, 0], [rad, 0], [-rad, 0], [0, rad], [0, -rad])]
-            if any((h := s.env.ray_down(q, top + 0.5, top, ignore=obj)) is not None and h > top for q in probes):
+            if drawer and any((h := s.env.ray_down(q, top + 0.5, top, ignore=obj)) is not None and h > top for q in probes):
                 continue
-            d = float(np.linalg.norm(p - xy))
+            d = 100 * crowd + float(np.linalg.norm(p - xy))
             if best is None or d < best[0]:
                 best = (d, p)
     return xy if best is None else best[1]
