@@ -115,7 +115,27 @@ def grasp_blockers(scene: Scene, obj: str, grasp, keep: set[str]) -> list[str]:
     return out
 
 
-def free_spot(scene: Scene, obj: str, avoid: list[np.ndarray]) -> np.ndarray | None:
+def drawer_sweep(scene: Scene, joint: str) -> np.ndarray | None:
+    """(2, 3) box the drawer of a slide `joint` covers from now until fully open, or None
+    for a hinge."""
+    fr = scene.env.joint_frame(joint)
+    if fr["kind"] != "slide":
+        return None
+    rng = fr["range"]
+    open_q = rng[0] if abs(rng[0]) > abs(rng[1]) else rng[1]
+    shift = fr["axis"] * (open_q - fr["qpos"])
+    boxes = scene.env.joint_part_boxes(joint)
+    lo, hi = boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0)
+    return np.array([np.minimum(lo, lo + shift), np.maximum(hi, hi + shift)])
+
+
+def under_sweep(scene: Scene, obj: str, sweep: np.ndarray, margin: float = 0.05) -> bool:
+    """The opened drawer would overhang `obj` (or the hand grasping it, `margin`)."""
+    b = scene.box(obj)
+    return _overlap(np.array([b.lo, b.hi]), sweep, pad=margin) and b.hi[2] < sweep[1, 2]
+
+
+def free_spot(scene: Scene, obj: str, avoid: list[np.ndarray], forbid: list[np.ndarray] = ()) -> np.ndarray | None:
     """A table spot (xy) where `obj` can stand without touching anything, near the hand,
     away from the points in `avoid` (goal targets), inside the comfortable region."""
     box = scene.box(obj)
@@ -126,11 +146,11 @@ def free_spot(scene: Scene, obj: str, avoid: list[np.ndarray]) -> np.ndarray | N
     boxes = [b for _, b in scene.obstacle_boxes({obj}) if b[1, 2] > table + 0.005]
     best = None
     home = base + HOME_XY
-    for x in np.arange(0.3, 0.65, 0.03):  # near the robot: far spots are slow to reach
+    for x in np.arange(0.42, 0.7, 0.03):  # in front of the robot: far or close spots are slow
         for y in np.arange(-0.3, 0.301, 0.03):
             xy = base + [x, y]
             sq = np.array([[*(xy - r), 0.0], [*(xy + r), 0.0]])
-            if any(_overlap(b, sq) for b in boxes):
+            if any(_overlap(b, sq) for b in boxes) or any(_overlap(f, sq, pad=0.05) for f in forbid):
                 continue
             cost = float(np.linalg.norm(xy - eef)) + float(np.linalg.norm(xy - home))
             cost += sum(max(0.0, 0.2 - float(np.linalg.norm(xy - a[:2]))) * 5 for a in avoid)

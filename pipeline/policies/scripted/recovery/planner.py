@@ -100,6 +100,15 @@ def recover(ctx: Ctx, now: Callable[[], int], budget: int | None) -> Plan:
                 yield from put_aside(ctx, block[0], aside[block[0]] - 1)
                 continue
         _debug("subgoal", sub, "try", tries[sub], "held", held)
+        if sub[0] == "open" and (joint := articulated.part_joint(s.env, sub[1])) is not None:
+            # an object the opened drawer would overhang cannot be grasped afterwards: first aside
+            sweep = checks.drawer_sweep(s, joint)
+            under = [m for m in movers if sweep is not None and checks.under_sweep(s, m, sweep) and aside[m] < MAX_ASIDE]
+            if under:
+                _debug("aside before opening", under)
+                aside[under[0]] += 1
+                yield from put_aside(ctx, under[0], aside[under[0]] - 1, forbid=[sweep])
+                continue
         if tries[sub] >= MAX_TRIES:
             raise GiveUp(GiveUpReason.RETRIES_EXHAUSTED, f"{' '.join(sub)} failed {MAX_TRIES} times")
         if isinstance(ctx.noise, RetryNoise):
