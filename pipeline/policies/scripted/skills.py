@@ -111,7 +111,7 @@ def place_xy(ctx: Ctx, obj: str, target: str) -> np.ndarray:
     half = np.abs(r["mat"]) @ r["size"]
     top = r["pos"][2] + half[2]
     size = s.box(obj).size[:2]
-    rad = 0.4 * float(min(size))
+    rad = 0.5 * float(max(size)) + 0.01  # sky over the whole footprint (a bowl rim hits the face above)
     # other objects already standing in the region (the second moka pot on a stove)
     reach = 0.5 * float(max(size))  # objects within this of the region count
     others = [s.box(o) for o in s.env.object_names if o != obj]
