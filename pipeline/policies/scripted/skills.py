@@ -116,6 +116,8 @@ def place_xy(ctx: Ctx, obj: str, target: str) -> np.ndarray:
     reach = 0.5 * float(max(size))  # objects within this of the region count
     others = [s.box(o) for o in s.env.object_names if o != obj]
     others = [b for b in others if np.all(b.hi[:2] > xy - half[:2] - reach) and np.all(b.lo[:2] < xy + half[:2] + reach)]
+    if s.env.region(target)["parent"] in s.env.object_names:
+        others = []  # a container object (a basket): things may share its middle
     if not drawer and not others:
         return xy
     best = None
