@@ -53,8 +53,8 @@ def _python(code: str, timeout: int = 300) -> subprocess.CompletedProcess:
 
 
 def _parsed(raw: str) -> str:
-    from pipeline.vlm.parse import parse_localization
-    from pipeline.vlm.schemas import Quarantine
+    from pipeline.labelers.vlm.parse import parse_localization
+    from pipeline.labelers.vlm.schemas import Quarantine
 
     out = parse_localization(raw, 10.0)
     assert isinstance(out, Quarantine), f"returned {out!r}"
@@ -320,7 +320,7 @@ def _(tmp):
                                       '_l.define("nms(Tensor dets, Tensor scores, float iou_threshold) -> Tensor")\n')
     out = _python(f"""
         import sys; sys.path.insert(0, {str(tmp)!r})
-        from pipeline.vlm import torch_compat
+        from pipeline.labelers.vlm import torch_compat
         torch_compat.ensure_torchvision()
         print("shimmed" if torch_compat.shimmed() else "imported untouched")
     """)
@@ -330,14 +330,14 @@ def _(tmp):
 
 @case("transformers backend: every 2nd frame of a 49-frame 4 fps video, Qwen2.5-VL", slow=True)
 def _(tmp):
-    from pipeline.vlm.torch_compat import ensure_torchvision
+    from pipeline.labelers.vlm.torch_compat import ensure_torchvision
 
     ensure_torchvision()
     from pipeline.config import SamplingConfig, TransformersBackendConfig
-    from pipeline.vlm.backends.transformers_backend import TransformersBackend
-    from pipeline.vlm.prompts import load_prompts
-    from tests.vlm.factories import frames_table, write_video
-    from tests.vlm.tiny_qwen import build_tiny_qwen
+    from pipeline.labelers.vlm.backends.transformers_backend import TransformersBackend
+    from pipeline.labelers.vlm.prompts import load_prompts
+    from tests.labelers.vlm.factories import frames_table, write_video
+    from tests.labelers.vlm.tiny_qwen import build_tiny_qwen
 
     video = write_video(tmp / "v.mp4", 49, fps=4)
     cfg = TransformersBackendConfig(model_path=build_tiny_qwen(tmp / "q", "qwen2_5_vl"), max_new_tokens=1)

@@ -26,10 +26,10 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from pipeline.config import OpenAIBackendConfig, SamplingConfig  # noqa: E402
-from pipeline.vlm.backends.base import VLMRequest  # noqa: E402
-from pipeline.vlm.backends.openai_backend import OpenAIBackend  # noqa: E402
-from pipeline.vlm.prompts import load_prompts  # noqa: E402
-from tests.vlm.loopback_server import LoopbackServer  # noqa: E402
+from pipeline.labelers.vlm.backends.base import VLMRequest  # noqa: E402
+from pipeline.labelers.vlm.backends.openai_backend import OpenAIBackend  # noqa: E402
+from pipeline.labelers.vlm.prompts import load_prompts  # noqa: E402
+from tests.labelers.vlm.loopback_server import LoopbackServer  # noqa: E402
 
 INSTRUCTION = "put the black bowl on the plate"
 

@@ -190,7 +190,7 @@ class Stage1Config(_Strict):
 
 
 class SamplingConfig(_Strict):
-    """How a video is turned into VLM input (see pipeline/vlm/video_input.py)."""
+    """How a video is turned into VLM input (see pipeline/labelers/vlm/video_input.py)."""
 
     # target frames per second; the effective rate is source_fps / round(source_fps / fps),
     # so 1, 2 or 4 on a 20 Hz video (Qwen2.5-VL's time ids want 1, 2 or 4)

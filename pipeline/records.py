@@ -139,10 +139,23 @@ def episodes_table(records: list[EpisodeRecord]) -> pa.Table:
 
 
 def read_episodes(path) -> list[EpisodeRecord]:
-    """The stage 1 manifest as EpisodeRecords."""
+    """The stage 1 manifest as EpisodeRecords; a bad row raises an InputError naming the file,
+    the row and the field (`read_episode_rows` sets bad rows aside instead)."""
+    import json
+
     import pyarrow.parquet as pq
 
-    return [_episode_from_row(row) for row in pq.read_table(path).to_pylist()]
+    from pipeline.errors import invalid_file
+
+    out = []
+    for i, row in enumerate(pq.read_table(path).to_pylist()):
+        try:
+            out.append(_episode_from_row(row))
+        except json.JSONDecodeError as e:
+            raise invalid_file(path, e, where=f"row {i}.policy_params") from e
+        except (ValueError, TypeError) as e:  # ValidationError is a ValueError
+            raise invalid_file(path, e, where=f"row {i}.") from e
+    return out
 
 
 def _episode_from_row(row: dict) -> EpisodeRecord:

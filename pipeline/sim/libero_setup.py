@@ -96,9 +96,6 @@ def ensure_libero_ready() -> Path:
         from pipeline.atomic import write_text
 
         write_text(cfg_file, yaml.safe_dump(wanted))
-    # MuJoCo picks its GL backend at import; headless machines need EGL
-    os.environ.setdefault("MUJOCO_GL", "egl")
-    os.environ.setdefault("PYOPENGL_PLATFORM", os.environ["MUJOCO_GL"])
     _READY = True
     return cfg_file
 

@@ -17,18 +17,27 @@ import pyarrow.parquet as pq
 from rich.table import Table
 
 from pipeline.atomic import Completions, write_json, write_with
+from pipeline.errors import InputError, invalid_file
 from pipeline.records import EpisodeRecord, episodes_table
+
+
+def _record(marker: Path) -> EpisodeRecord:
+    try:
+        return EpisodeRecord.model_validate(json.loads(marker.read_text()))
+    except (ValueError, OSError) as e:  # ValidationError and JSONDecodeError are ValueErrors
+        raise invalid_file(marker, e) from e
 
 
 def collect_records(stage1_dir: Path, unit_ids: list[str] | None = None) -> list[EpisodeRecord]:
     """EpisodeRecords of the done units (of `unit_ids`, or all), sorted by key."""
     done = Completions(stage1_dir)
     ids = sorted(done.done_ids() if unit_ids is None else set(unit_ids) & done.done_ids())
-    records = [EpisodeRecord.model_validate(json.loads((done.dir / f"{u}.done").read_text())) for u in ids]
+    records = [_record(done.dir / f"{u}.done") for u in ids]
     records.sort(key=lambda r: r.key)
     keys = [r.key for r in records]
     if len(set(keys)) != len(keys):
-        raise RuntimeError(f"{stage1_dir}: duplicate episode keys among done markers")
+        twice = sorted({k for k in keys if keys.count(k) > 1})
+        raise InputError(done.dir, "key", f"episode keys {twice[:5]} appear in more than one done marker")
     return records
 
 

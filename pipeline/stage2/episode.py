@@ -31,9 +31,12 @@ from pipeline.evidence import compute_evidence, write_evidence
 from pipeline.records import EpisodeRecord, Localization, QuarantineEntry
 from pipeline.stage2.history import build_history, render_frames, write_history
 from pipeline.stage2.layout import Stage2Paths, load_episode
+from pipeline.labelers.base import Episode, Onset, Provenance
+from pipeline.labelers.simstate.labeler import SimstateLocalizer
 from pipeline.stage2.phases import settled_step, split_phases, step_for_time
 from pipeline.stage2.scenes import scene_stem, write_scene
-from pipeline.stage2.simstate import localize
+
+SIMSTATE = SimstateLocalizer()
 
 
 @dataclass
@@ -64,9 +67,8 @@ def run_relative(file: str | None, run: Path) -> str | None:
 
 
 def process_episode(env, rec: EpisodeRecord, stage1: Path, paths: Stage2Paths, cfg: Stage2Config,
-                    vlm: dict | None = None) -> Outcome:
-    """`vlm`: None for simstate, else {"source", "model", "prompt_name", "prompt_hash", "raw_text",
-    and either "fail_time_s" or "reason" (+ "detail")} as stored by the VLM step."""
+                    vlm: Onset | None = None) -> Outcome:
+    """`vlm`: None for simstate, else the VLM step's stored answer (a fail_time_s or a reason)."""
     try:
         ep = load_episode(stage1, rec)
     except EpisodeError as e:
@@ -78,21 +80,21 @@ def process_episode(env, rec: EpisodeRecord, stage1: Path, paths: Stage2Paths, c
     ev = compute_evidence(env, ep.states, grip, rec.control_hz)
     ev_rel = paths.evidence(rec)
     write_evidence(paths.abs(ev_rel), ev)
-    sim = localize(ev)
-    source = vlm["source"] if vlm else "simstate"
-    trace = {k: (vlm or {}).get(k) for k in ("model", "prompt_name", "prompt_hash", "raw_text")}
+    sim = SIMSTATE.localize([Episode(rec, stage1 / rec.path, evidence=ev)])[0]  # always: events + agreement
+    source = vlm.source if vlm else sim.source
+    trace = (vlm or Provenance(source=source)).trace()
 
     def quarantine(reason: str, detail: str, **extra) -> Outcome:
         entry = QuarantineEntry(key=rec.key, stage="stage2", source=source, reason=reason, detail=detail,
                                 events=sim.events, evidence=str(ev_rel), **trace, **extra)
         return _quarantine(paths, rec, entry)
 
-    if vlm is not None and "fail_time_s" not in vlm:
-        return quarantine(vlm.get("reason", "backend_error"), vlm.get("detail", ""))
+    if vlm is not None and not vlm.found:
+        return quarantine(vlm.reason or "backend_error", vlm.detail)
     if vlm is not None:
-        onset = step_for_time(float(vlm["fail_time_s"]), ep.frames, rec.steps, rec.control_hz)
-    elif sim.onset_step is not None:
-        onset = sim.onset_step
+        onset = step_for_time(vlm.fail_time_s, ep.frames, rec.steps, rec.control_hz)
+    elif sim.fail_step is not None:
+        onset = sim.fail_step
     else:
         fb = sim.fallback_step
         return quarantine("no_failure_found",
@@ -121,14 +123,15 @@ def process_episode(env, rec: EpisodeRecord, stage1: Path, paths: Stage2Paths, c
     loc = Localization(
         key=rec.key, suite=rec.suite, task=rec.task, episode_id=rec.episode_id, instruction=rec.instruction,
         source=source, **trace, fail_step=onset, scene_step=scene_step,
-        fail_time_s=float(vlm["fail_time_s"]) if vlm else round(onset / rec.control_hz, 3),
+        fail_time_s=vlm.fail_time_s if vlm else round(onset / rec.control_hz, 3),
         phases=split_phases(ev, onset, cfg.settle_speed_mps, cfg.settle_steps),
         scene_bddl=str(bddl.relative_to(paths.root)), scene_state=str(npy.relative_to(paths.root)),
         history=history_rel, events=sim.events, evidence=str(ev_rel),
-        simstate_time_s=None if sim.onset_step is None else sim.onset_step / rec.control_hz,
+        simstate_time_s=sim.fail_time_s,
     )
     paths.abs(paths.quarantine(rec)).unlink(missing_ok=True)
     write_json(paths.abs(paths.localization(rec)), loc.model_dump(mode="json"))
-    kind = sim.onset_event.kind if (vlm is None and sim.onset_event) else ""
-    return Outcome(key=rec.key, status="scene", onset_step=onset, simstate_step=sim.onset_step, source=source,
+    onset_event = next((e for e in sim.events if e.step == sim.fail_step), None)
+    kind = onset_event.kind if (vlm is None and onset_event) else ""
+    return Outcome(key=rec.key, status="scene", onset_step=onset, simstate_step=sim.fail_step, source=source,
                    onset_kind=kind)

@@ -4,7 +4,7 @@ Inputs: the per-episode Localization / QuarantineEntry JSON files under the stag
 Outputs (rewritten from those files on every run, so they always match them):
     localizations.parquet            one row per Localization (phases flattened, events as JSON)
     agreement.json + agreement.png   when a VLM ran beside simstate: MAE and shares within
-                                     +-0.5 s / +-1 s of |vlm - simstate| (pipeline.vlm.agreement),
+                                     +-0.5 s / +-1 s of |vlm - simstate| (pipeline.labelers.vlm.agreement),
                                      and a histogram of the signed differences
     summary.json                     counts: scenes, quarantined by reason, by onset event kind;
                                      set_aside + input_faults: episodes quarantined for a bad
@@ -21,12 +21,20 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from pipeline.atomic import write_json, write_with
+from pipeline.errors import invalid_file
 from pipeline.records import Localization, QuarantineEntry
 
 
+def _read(model, path: Path):
+    try:
+        return model.model_validate_json(path.read_text())
+    except (ValueError, OSError) as e:  # ValidationError is a ValueError; a bad file is named, not a traceback
+        raise invalid_file(path, e) from e
+
+
 def load_outputs(stage2: Path) -> tuple[list[Localization], list[QuarantineEntry]]:
-    locs = [Localization.model_validate_json(p.read_text()) for p in sorted((stage2 / "localizations").rglob("*.json"))]
-    quar = [QuarantineEntry.model_validate_json(p.read_text()) for p in sorted((stage2 / "quarantine").rglob("*.json"))]
+    locs = [_read(Localization, p) for p in sorted((stage2 / "localizations").rglob("*.json"))]
+    quar = [_read(QuarantineEntry, p) for p in sorted((stage2 / "quarantine").rglob("*.json"))]
     return locs, quar
 
 
@@ -46,7 +54,7 @@ def write_agreement(stage2: Path, locs: list[Localization]) -> dict | None:
     vlm = [loc for loc in locs if loc.source != "simstate"]
     if not vlm:
         return None
-    from pipeline.vlm.agreement import agreement
+    from pipeline.labelers.vlm.agreement import agreement
 
     pairs = [(loc.fail_time_s, loc.simstate_time_s) for loc in vlm if loc.simstate_time_s is not None]
     result = agreement(pairs).model_dump()

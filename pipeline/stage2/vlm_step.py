@@ -1,9 +1,10 @@
-"""The one place stage 2 calls a VLM (`openai` / `transformers` backends of pipeline.vlm).
+"""The one place stage 2 calls a VLM: the `openai` / `transformers` localizer of
+`pipeline.labelers` (built by `registry.make_localizer`, used through the Localizer protocol).
 
 Input: the failed episodes still to do and the run config. For each episode the backend
 is asked when the failure began (agentview video + instruction + stage 1's frame table, so
 times are true times); the answer goes through the loss-free parser. Output, per episode,
-`stage2/vlm/<suite>/<task>/<episode_id>.json`:
+an `Onset` (pipeline.labelers.base) stored as `stage2/vlm/<suite>/<task>/<episode_id>.json`:
     {"source", "model", "prompt_name", "prompt_hash", "raw_text", "latency_s",
      "fail_time_s"}                      -- a usable answer, or
     {..., "reason", "detail"}           -- the parser's / backend's quarantine reason.
@@ -18,32 +19,11 @@ from pathlib import Path
 
 from pipeline.atomic import write_json
 from pipeline.config import Config
+from pipeline.labelers.base import Episode, Onset
 from pipeline.records import EpisodeRecord
 from pipeline.stage2.layout import Stage2Paths
 
 BATCH = 32
-
-
-def _duration(result, rec: EpisodeRecord, frames) -> float:
-    if result.video is not None:
-        return float(result.video.duration_s)
-    if frames is not None and frames.num_rows:
-        return float(max(frames.column("time_s").to_pylist()))
-    return rec.steps / rec.control_hz
-
-
-def _stored(result, rec: EpisodeRecord, frames) -> dict:
-    from pipeline.vlm.parse import parse_localization
-    from pipeline.vlm.schemas import Quarantine
-
-    out = {"source": result.backend, "model": result.model, "prompt_name": result.prompt_name,
-           "prompt_hash": result.prompt_hash, "raw_text": result.raw_text, "latency_s": result.latency_s}
-    if result.error:
-        return {**out, "reason": "backend_error", "detail": result.error}
-    answer = parse_localization(result, _duration(result, rec, frames))
-    if isinstance(answer, Quarantine):
-        return {**out, "reason": answer.reason.value, "detail": answer.detail}
-    return {**out, "fail_time_s": float(answer.fail)}
 
 
 def run_vlm(cfg: Config, episodes: list[EpisodeRecord], paths: Stage2Paths,
@@ -52,38 +32,34 @@ def run_vlm(cfg: Config, episodes: list[EpisodeRecord], paths: Stage2Paths,
     import pyarrow as pa
     import pyarrow.parquet as pq
 
-    from pipeline.vlm.backends import VLMRequest, make_backend
+    from pipeline.labelers.registry import make_localizer
 
     stage1 = cfg.out / "stage1"
     todo = [r for r in episodes if not paths.abs(paths.vlm(r)).exists()]
     if not todo:
         return 0
-    backend = make_backend(cfg.stage2.vlm)
+    localizer = make_localizer(cfg.stage2.vlm)
     asked = 0
     try:
         for i in range(0, len(todo), BATCH):
-            batch, requests, frames = [], [], {}
+            batch: list[Episode] = []
             for rec in todo[i : i + BATCH]:
                 folder = stage1 / rec.path
                 video = rec.videos.get("agentview")
                 if not video or not (folder / video).exists():
-                    write_json(paths.abs(paths.vlm(rec)), {"source": backend.name, "reason": "no_video",
-                                                           "detail": f"no agentview video in {folder}"})
+                    batch.append(Episode(rec, folder))  # the localizer answers no_video
                     continue
                 fp = folder / "frames.parquet"
                 try:
-                    frames[rec.key] = pq.read_table(fp) if fp.exists() else None
+                    frames = pq.read_table(fp) if fp.exists() else None
                 except (pa.ArrowException, OSError) as e:  # truncated: the episode worker sets it aside
-                    write_json(paths.abs(paths.vlm(rec)), {"source": backend.name, "reason": "stage1_bad_frames",
-                                                           "detail": f"{fp}: unreadable ({e})"})
+                    bad = Onset(source=localizer.name, reason="stage1_bad_frames", detail=f"{fp}: unreadable ({e})")
+                    write_json(paths.abs(paths.vlm(rec)), bad.stored())
                     continue
-                requests.append(VLMRequest(task="localize", video=Path(folder / video), instruction=rec.instruction,
-                                           frames_table=frames[rec.key], key=rec.key))
-                batch.append(rec)
-            results = backend.run(requests, progress=(lambda _r: on_result()) if on_result else None)
-            for rec, res in zip(batch, results, strict=True):
-                write_json(paths.abs(paths.vlm(rec)), _stored(res, rec, frames[rec.key]))
-            asked += len(batch)
+                batch.append(Episode(rec, folder, Path(folder / video), frames))
+            for ep, onset in zip(batch, localizer.localize(batch, progress=on_result), strict=True):
+                write_json(paths.abs(paths.vlm(ep.record)), onset.stored())
+            asked += sum(ep.video is not None for ep in batch)
     finally:
-        backend.close()
+        localizer.close()
     return asked

@@ -11,13 +11,13 @@ again. An `episode_error` gets no marker, so the next run tries it again.
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
 from pipeline.atomic import Completions, write_json
 from pipeline.config import Stage2Config
 from pipeline.errors import FatalError
+from pipeline.labelers.base import Onset
 from pipeline.records import EpisodeRecord, QuarantineEntry
 
 _CACHE = None  # per worker process: the last task's environment
@@ -51,6 +51,19 @@ def _set_aside(paths, rec: EpisodeRecord, e: Exception):
     return Outcome(key=rec.key, status="quarantine", reason=entry.reason)
 
 
+def _stored_onset(paths, rec: EpisodeRecord, backend: str) -> Onset | None:
+    """The VLM step's answer for `rec` (None for simstate, which localizes in the worker)."""
+    if backend == "simstate":
+        return None
+    file = paths.abs(paths.vlm(rec))
+    if not file.exists():
+        return Onset(source=backend, reason="backend_error", detail="no stored VLM result")
+    try:
+        return Onset.model_validate_json(file.read_text())
+    except ValueError as e:  # ValidationError included: this episode is set aside (episode_error), naming the file
+        raise ValueError(f"{file}: not a stored VLM answer: {e}") from e
+
+
 def process_task(unit: TaskUnit, emit) -> list[dict]:
     from pipeline.stage2.episode import process_episode
     from pipeline.stage2.layout import Stage2Paths, fingerprint, unit_id
@@ -63,12 +76,9 @@ def process_task(unit: TaskUnit, emit) -> list[dict]:
     results = []
     for raw in unit.episodes:
         rec = EpisodeRecord.model_validate_json(raw)
-        vlm_file = paths.abs(paths.vlm(rec))
-        vlm = json.loads(vlm_file.read_text()) if cfg.vlm.backend != "simstate" and vlm_file.exists() else None
-        if cfg.vlm.backend != "simstate" and vlm is None:
-            vlm = {"source": cfg.vlm.backend, "reason": "backend_error", "detail": "no stored VLM result"}
         inputs = fingerprint(run / "stage1", rec)  # before reading: a file changed meanwhile is redone
         try:
+            vlm = _stored_onset(paths, rec, cfg.vlm.backend)
             out = process_episode(env, rec, run / "stage1", paths, cfg, vlm)
             done.mark_done(unit_id(rec), {"status": out.status, "reason": out.reason, "inputs": inputs})
         except FatalError:

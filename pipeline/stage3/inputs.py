@@ -16,6 +16,7 @@ Paths in the context are relative to the run folder (the server serves nothing e
 from __future__ import annotations
 
 import json
+import logging
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -25,6 +26,18 @@ from pydantic import ValidationError
 from pipeline.atomic import file_stamp
 from pipeline.records import Localization, QuarantineEntry
 from pipeline.sim.render import CAMERAS
+
+
+log = logging.getLogger("pipeline.stage3")
+# what reading a media or table file that exists can raise when it is broken: pyarrow's
+# ArrowInvalid and PyAV's InvalidDataError are ValueErrors, ArrowIOError an OSError, a
+# missing column a KeyError, a video without a stream an IndexError; anything else is a bug
+UNREADABLE = (OSError, ValueError, KeyError, IndexError)
+
+
+def warn_unreadable(path: Path, e: Exception, effect: str) -> None:
+    """Say which file could not be read and what the run does without it (on stderr)."""
+    log.warning("stage 3: %s: unreadable (%s: %s); %s", path, type(e).__name__, e, effect)
 
 
 # reasons of the units `collect` sets aside itself: a stage-2 file it cannot use as it is
@@ -84,7 +97,7 @@ def _rel(run_dir: Path, path: Path) -> str:
 def _lengths(run_dir: Path) -> dict[str, float]:
     """Latest valid onset time by key, from the stage-1 manifest (rows that read): the last
     state's time plus one video frame, since a VLM sees a video of total_frames / fps seconds
-    (pipeline.vlm.video_input) and may answer up to its end."""
+    (pipeline.labelers.vlm.video_input) and may answer up to its end."""
     manifest = run_dir / "stage1" / "episodes.parquet"
     if not manifest.is_file():
         return {}
@@ -92,7 +105,8 @@ def _lengths(run_dir: Path) -> dict[str, float]:
 
     try:
         records, _ = read_episode_rows(manifest)
-    except Exception:  # stage 2 reports an unreadable manifest; here it only bounds times
+    except UNREADABLE as e:  # stage 2 reports an unreadable manifest; here it only bounds times
+        warn_unreadable(manifest, e, "onset times are bounded by each episode's frames or evidence")
         return {}
     return {r.key: r.steps / r.control_hz + (1 / r.video_fps if r.video_fps else 0.0) for r in records}
 
@@ -173,24 +187,26 @@ def _duration_of(run_dir: Path, key: str) -> float | None:
 
     suite, task, ep = key.split("/", 2)
     frames = run_dir / "stage1" / "episodes" / suite / task / ep / "frames.parquet"
-    try:
-        times = sorted(pq.read_table(frames, columns=["time_s"]).column("time_s").to_pylist())
-        if times:
-            return times[-1] + (times[-1] - times[-2] if len(times) > 1 else 0.0)
-    except Exception:  # missing or unreadable: try the evidence
-        pass
+    if frames.is_file():
+        try:
+            times = sorted(pq.read_table(frames, columns=["time_s"]).column("time_s").to_pylist())
+            if times:
+                return times[-1] + (times[-1] - times[-2] if len(times) > 1 else 0.0)
+        except UNREADABLE as e:  # try the evidence
+            warn_unreadable(frames, e, "the episode's length comes from its evidence")
     ev = Path("stage2") / "evidence" / suite / task / f"{ep}.parquet"
     return _duration(run_dir, None, ev.as_posix() if (run_dir / ev).is_file() else None)
 
 
 def _video_fps(path: Path) -> float | None:
-    try:
-        import av
+    import av
 
+    try:
         with av.open(str(path)) as c:
             rate = c.streams.video[0].average_rate
             return float(rate) if rate else None
-    except Exception:  # a broken video is shown as missing by the page, not fatal here
+    except (*UNREADABLE, av.FFmpegError) as e:  # the page shows the video as missing
+        warn_unreadable(path, e, "the review uses the configured video fps")
         return None
 
 
@@ -225,6 +241,7 @@ def _duration(run_dir: Path, frames: str | None, evidence: str | None) -> float 
                 col = pq.read_table(run_dir / rel, columns=["time_s"]).column("time_s").to_pylist()
                 if col:
                     return float(max(col))
-            except Exception:
+            except UNREADABLE as e:
+                warn_unreadable(run_dir / rel, e, "the episode's duration comes from the next source, if any")
                 continue
     return None

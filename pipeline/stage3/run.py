@@ -31,12 +31,13 @@ from rich.progress import Progress
 
 from pipeline.atomic import Completions, write_json
 from pipeline.config import Config, save_resolved
+from pipeline.errors import FatalError
 from pipeline.records import Characterization, QuarantineEntry
 from pipeline.review.db import write_session
 from pipeline.review.enqueue import enqueue
 from pipeline.review.server import engine_for
-from pipeline.stage3.characterizers import make_characterizer
-from pipeline.stage3.inputs import INPUT_FAULTS, Unit, collect, context, fingerprint
+from pipeline.labelers.registry import make_characterizer
+from pipeline.stage3.inputs import INPUT_FAULTS, UNREADABLE, Unit, collect, context, fingerprint, warn_unreadable
 
 BATCH = 16
 
@@ -79,16 +80,20 @@ def run(cfg: Config) -> dict:
     console = Console()
     if not units:
         console.print(f"[yellow]stage 3: nothing to do[/yellow]: no stage-2 outputs under {run_dir / 'stage2'}")
-    characterize = make_characterizer(cfg) if any(u.localization for u in todo) else None
+    characterizer = make_characterizer(cfg.stage3.vlm, run_dir) if any(u.localization for u in todo) else None
     hz, fps = cfg.stage1.rollout.control_hz, float(cfg.stage1.video.fps)
     try:
         with Progress(console=console, transient=False) as bar:
-            task = bar.add_task(f"stage 3: characterize + enqueue ({characterize.name if characterize else '-'})",
+            task = bar.add_task(f"stage 3: characterize + enqueue ({characterizer.name if characterizer else '-'})",
                                 total=len(todo))
             for start in range(0, len(todo), BATCH):
                 batch = todo[start:start + BATCH]
                 locs = [u.localization for u in batch if u.localization is not None]
-                outcomes = iter(characterize(locs) if locs else [])
+                got = characterizer.characterize(locs) if locs else []
+                if len(got) != len(locs):  # a lost outcome would shift every later one onto the wrong episode
+                    raise FatalError(f"stage 3: characterizer {characterizer.name} gave {len(got)} outcomes "
+                                     f"for {len(locs)} localizations")
+                outcomes = iter(got)
                 for unit in batch:
                     outcome = next(outcomes) if unit.localization is not None else unit.quarantine
                     counts[_store(run_dir, cfg, engine, unit, outcome, hz, fps)] += 1
@@ -96,8 +101,8 @@ def run(cfg: Config) -> dict:
                                                               "inputs": inputs[unit.key]})
                     bar.advance(task)
     finally:
-        if characterize is not None and hasattr(characterize, "close"):
-            characterize.close()
+        if characterizer is not None:
+            characterizer.close()
     faults = [u.quarantine for u in units if u.quarantine and u.quarantine.stage == "stage3"
               and u.quarantine.reason in INPUT_FAULTS]
     summary = {"episodes": len(units), **counts, "set_aside": len(faults),
@@ -168,7 +173,8 @@ def _instruction(run_dir: Path, unit: Unit) -> str:
         suite, task, ep = unit.key.split("/", 2)
         try:
             rows = pq.read_table(manifest, columns=["suite", "task", "episode_id", "instruction"]).to_pylist()
-        except Exception:  # an unreadable manifest is stage 2's to report; the key still names the task
+        except UNREADABLE as e:  # an unreadable manifest is stage 2's to report; the key still names the task
+            warn_unreadable(manifest, e, "the instruction is made from the task name")
             rows = []
         for row in rows:
             if (row["suite"], row["task"], row["episode_id"]) == (suite, task, ep) and row["instruction"]:

@@ -8,12 +8,13 @@ stage2/); for `openai` / `transformers` the episode's agentview video and frame 
 Failed episodes without a usable truth are set aside with their reason and counted.
 
 Localizers:
-- simstate: `pipeline.stage2.simstate.localize` for the onset, then
-  `pipeline.characterize.simstate.characterize` for level and category (the same calls
-  stages 2 and 3 make, with the current rules and thresholds).
-- openai | transformers: the VLM backend of `stage2.vlm` (backend replaced by the chosen
-  one) asked to localize, then to characterize at its own onset; answers go through the
-  project's parser. An unusable answer is a miss, with its quarantine reason.
+Every localizer and characterizer is the one stages 2 and 3 use, built by
+`pipeline.labelers.registry` and called through the `Localizer` / `Characterizer` protocols:
+- simstate: the simstate localizer on the evidence for the onset, then the simstate
+  characterizer for level and category (current rules and thresholds).
+- openai | transformers: `stage2.vlm` with the chosen backend; one model is asked to localize,
+  then to characterize at its own onset; answers go through the project's parser. An
+  unusable answer is a miss, with its quarantine reason.
 
 Output, under `<run>/bench/localize_<localizer>/` (or `--out`), written atomically:
     report.json        every figure below, the per-episode rows and the set-aside reasons
@@ -36,7 +37,9 @@ from pathlib import Path
 from pipeline.atomic import write_json, write_text, write_with
 from pipeline.config import Config
 from pipeline.errors import FatalError
-from pipeline.records import Category, EpisodeRecord, Level, read_episodes
+from pipeline.labelers.base import Characterizer, Episode
+from pipeline.labelers.registry import make_characterizer, make_localizer
+from pipeline.records import Category, Characterization, EpisodeRecord, Level, Localization, Phases, read_episodes
 from pipeline.truth.derive import EpisodeTruth, TruthError, episode_truth
 
 LOCALIZERS = ("simstate", "openai", "transformers")
@@ -68,15 +71,47 @@ def load_truths(run_dir: Path) -> tuple[list[EpisodeRecord], dict[str, EpisodeTr
 
 
 # ---- localizers --------------------------------------------------------------------------
+def _episode(stage1: Path, rec: EpisodeRecord, evidence=None) -> Episode:
+    """What a localizer sees of `rec`: its agentview video and frame table (a missing video is
+    the localizer's `no_video`), and the evidence when the caller measured it."""
+    import pyarrow.parquet as pq
+
+    folder = stage1 / rec.path
+    video = rec.videos.get("agentview")
+    if evidence is not None or not video or not (folder / video).is_file():
+        return Episode(rec, folder, evidence=evidence)
+    fp = folder / "frames.parquet"
+    return Episode(rec, folder, folder / video, pq.read_table(fp) if fp.is_file() else None)
+
+
+def _stub_localization(rec: EpisodeRecord, step: int, time_s: float, source: str, phases: Phases | None = None,
+                       events=()) -> Localization:
+    """A Localization at the localizer's own onset (no scene is written: only the characterizer reads it)."""
+    phases = phases or Phases(pre=(0, step), during=(step, min(step + 1, rec.steps + 1)),
+                              post=(min(step + 1, rec.steps + 1), rec.steps + 1))
+    return Localization(key=rec.key, suite=rec.suite, task=rec.task, episode_id=rec.episode_id,
+                        instruction=rec.instruction, source=source, fail_step=step, fail_time_s=time_s,
+                        phases=phases, scene_bddl="", scene_state="", events=list(events))
+
+
+def _characterize(characterizer: Characterizer, out: dict[str, Prediction], locs: list[Localization]) -> None:
+    for loc, got in zip(locs, characterizer.characterize(locs), strict=True):
+        if isinstance(got, Characterization):
+            out[loc.key].level, out[loc.key].category = got.recovery_level.value, got.failure_category.value
+        else:
+            out[loc.key].reason = f"characterize: {got.reason}"
+
+
 def predict_simstate(cfg: Config, records: list[EpisodeRecord]) -> dict[str, Prediction]:
-    from pipeline.characterize.simstate import characterize
     from pipeline.evidence import compute_evidence, read_evidence
-    from pipeline.records import Localization
     from pipeline.stage2.layout import Stage2Paths, load_episode
     from pipeline.stage2.phases import split_phases
-    from pipeline.stage2.simstate import localize
 
     run_dir, paths = Path(cfg.out), Stage2Paths(Path(cfg.out) / "stage2")
+    vlm_cfg = cfg.stage2.vlm.model_copy(update={"backend": "simstate"})
+    localizer = make_localizer(vlm_cfg)
+    evidence: dict[str, object] = {}
+    characterizer = make_characterizer(vlm_cfg, run_dir, evidence_for=lambda loc: evidence[loc.key])
     out: dict[str, Prediction] = {}
     by_task: dict[tuple[str, str], list[EpisodeRecord]] = defaultdict(list)
     for rec in records:
@@ -98,70 +133,48 @@ def predict_simstate(cfg: Config, records: list[EpisodeRecord]) -> dict[str, Pre
             except Exception as e:  # noqa: BLE001 - one bad episode is a miss, the rest go on
                 out[rec.key] = Prediction(rec.key, reason=f"evidence: {type(e).__name__}: {e}")
                 continue
-            sim = localize(ev)
-            if sim.onset_step is None:
-                out[rec.key] = Prediction(rec.key, reason="no_failure_found")
+            [onset] = localizer.localize([_episode(run_dir / "stage1", rec, ev)])
+            if onset.fail_step is None:
+                out[rec.key] = Prediction(rec.key, reason=onset.reason or "no_failure_found")
                 continue
-            onset = min(sim.onset_step, len(ev) - 1)
-            loc = Localization(
-                key=rec.key, suite=rec.suite, task=rec.task, episode_id=rec.episode_id, instruction=rec.instruction,
-                source="simstate", fail_step=onset, fail_time_s=onset / rec.control_hz,
-                phases=split_phases(ev, onset, cfg.stage2.settle_speed_mps, cfg.stage2.settle_steps),
-                scene_bddl="", scene_state="", events=sim.events)
-            ch = characterize(loc, ev)
-            out[rec.key] = Prediction(rec.key, onset, ch.recovery_level.value, ch.failure_category.value)
+            step = min(onset.fail_step, len(ev) - 1)
+            loc = _stub_localization(rec, step, step / rec.control_hz, localizer.name,
+                                     split_phases(ev, step, cfg.stage2.settle_speed_mps, cfg.stage2.settle_steps),
+                                     onset.events)
+            out[rec.key] = Prediction(rec.key, step)
+            evidence[rec.key] = ev
+            _characterize(characterizer, out, [loc])
+            del evidence[rec.key]
         if env is not None:
             env.close()
     return out
 
 
 def predict_vlm(cfg: Config, backend_name: str, records: list[EpisodeRecord]) -> dict[str, Prediction]:
-    import pyarrow.parquet as pq
-
     from pipeline.stage2.phases import step_for_time
-    from pipeline.stage2.vlm_step import _stored
-    from pipeline.vlm.backends import VLMRequest, make_backend
-    from pipeline.vlm.parse import parse_characterization
-    from pipeline.vlm.schemas import Quarantine
 
     stage1 = Path(cfg.out) / "stage1"
     out: dict[str, Prediction] = {}
-    asked, frames = [], {}
-    for rec in records:
-        video = rec.videos.get("agentview")
-        folder = stage1 / rec.path
-        if not video or not (folder / video).is_file():
-            out[rec.key] = Prediction(rec.key, reason="no_video")
-            continue
-        fp = folder / "frames.parquet"
-        frames[rec.key] = pq.read_table(fp) if fp.is_file() else None
-        asked.append(rec)
-    if not asked:
-        return out
-    backend = make_backend(cfg.stage2.vlm.model_copy(update={"backend": backend_name}))
-    try:
-        reqs = [VLMRequest(task="localize", video=stage1 / r.path / r.videos["agentview"], instruction=r.instruction,
-                           frames_table=frames[r.key], key=r.key) for r in asked]
+    episodes = [_episode(stage1, rec) for rec in records]
+    if not any(e.video is not None for e in episodes):
+        return {e.record.key: Prediction(e.record.key, reason="no_video") for e in episodes}
+    vlm_cfg = cfg.stage2.vlm.model_copy(update={"backend": backend_name})
+    localizer = make_localizer(vlm_cfg)
+    try:  # one model answers both questions
+        characterizer = make_characterizer(vlm_cfg, Path(cfg.out), backend=localizer.backend)
         located = []
-        for rec, res in zip(asked, backend.run(reqs), strict=True):
-            got = _stored(res, rec, frames[rec.key])
-            if "fail_time_s" not in got:
-                out[rec.key] = Prediction(rec.key, reason=got.get("reason", "backend_error"))
+        for ep, onset in zip(episodes, localizer.localize(episodes), strict=True):
+            rec = ep.record
+            if not onset.found:
+                out[rec.key] = Prediction(rec.key, reason=onset.reason or "backend_error")
                 continue
-            step = step_for_time(float(got["fail_time_s"]), frames[rec.key], rec.steps, rec.control_hz)
+            step = step_for_time(onset.fail_time_s, ep.frames, rec.steps, rec.control_hz)
             out[rec.key] = Prediction(rec.key, step)
-            located.append((rec, float(got["fail_time_s"])))
-        reqs = [VLMRequest(task="characterize", video=stage1 / r.path / r.videos["agentview"],
-                           instruction=r.instruction, fail_time_s=t, frames_table=frames[r.key], key=r.key)
-                for r, t in located]
-        for (rec, _), res in zip(located, backend.run(reqs) if reqs else [], strict=True):
-            ans = parse_characterization(res)
-            if isinstance(ans, Quarantine):
-                out[rec.key].reason = f"characterize: {ans.reason.value}"
-            else:
-                out[rec.key].level, out[rec.key].category = ans.recovery_level.value, ans.failure_category.value
+            located.append(_stub_localization(rec, step, onset.fail_time_s, localizer.name))
+        if located:
+            _characterize(characterizer, out, located)
     finally:
-        backend.close()
+        localizer.close()
     return out
 
 

@@ -35,7 +35,7 @@ _OPS = None  # keep the op-schema library alive while torchvision is loaded
 
 def load_torchvision() -> None:
     """The PyPI torchvision 0.28 wheel is CUDA-linked; declare the two op schemas its import
-    looks up so it loads on CPU torch (same fix as `pipeline.vlm.torch_compat`)."""
+    looks up so it loads on CPU torch (same fix as `pipeline.labelers.vlm.torch_compat`)."""
     global _OPS
     try:
         torch._C._dispatch_find_schema_or_throw("torchvision::nms", "")

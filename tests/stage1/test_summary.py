@@ -2,7 +2,11 @@
 
 from __future__ import annotations
 
+import pyarrow as pa
+import pytest
+
 from pipeline.atomic import Completions
+from pipeline.errors import InputError
 from pipeline.records import EpisodeRecord, read_episodes
 from pipeline.stage1.summary import collect_records, summarize, write_manifest
 
@@ -34,3 +38,29 @@ def test_summary_counts_successes_failures_and_mean_steps_per_task():
     assert by[("libero_goal", "a")] == {"suite": "libero_goal", "task": "a", "episodes": 2, "successes": 1,
                                              "failures": 1, "mean_steps": 70.0}
     assert by[("all", "")]["episodes"] == 3 and by[("all", "")]["failures"] == 2
+
+
+def test_a_done_marker_that_is_not_an_episode_record_names_the_marker_and_field(tmp_path):
+    done = Completions(tmp_path)
+    done.mark_done("unit0", _record("a", 0, True, 40).model_dump(mode="json"))
+    done.mark_done("unit1", {**_record("a", 1, False, 100).model_dump(mode="json"), "steps": -3})
+    with pytest.raises(InputError) as got:
+        collect_records(tmp_path)
+    assert got.value.file == str(done.dir / "unit1.done") and got.value.field == "steps"
+    assert "unit1.done" in str(got.value) and "steps" in str(got.value)
+
+
+def test_a_manifest_row_that_is_not_an_episode_record_names_the_file_row_and_field(tmp_path):
+    import pyarrow.parquet as pq
+
+    from pipeline.records import episodes_table
+
+    path = write_manifest(tmp_path, [_record("a", 0, True, 40), _record("a", 1, False, 100)])
+    table = episodes_table([_record("a", 0, True, 40), _record("a", 1, False, 100)])
+    bad = table.set_column(table.schema.get_field_index("control_hz"), "control_hz",
+                           pa.array([20, 0], pa.int32()))  # control_hz must be > 0
+    pq.write_table(bad, path)
+    with pytest.raises(InputError) as got:
+        read_episodes(path)
+    assert (got.value.file, got.value.field) == (str(path), "row 1.control_hz")
+    assert str(path) in str(got.value)

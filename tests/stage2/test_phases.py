@@ -50,7 +50,7 @@ def test_seconds_map_to_steps_through_the_frame_table():
 @pytest.mark.sim
 @pytest.mark.xdist_group("stage2_rollouts")
 def test_the_drop_phase_lasts_until_the_fallen_bowl_is_at_rest(evidences):
-    from pipeline.stage2.simstate import localize
+    from pipeline.labelers.simstate.localizer import localize
 
     ev = evidences["drop"]
     onset = localize(ev).onset_step

@@ -99,7 +99,7 @@ def test_agreement_report_compares_vlm_and_simstate_onsets(tmp_path):
 def test_a_vlm_backend_localizes_over_loopback_and_simstate_runs_beside_it(stage1_run, episodes, tmp_path):
     import shutil
 
-    from tests.vlm.loopback_server import LoopbackServer
+    from tests.labelers.vlm.loopback_server import LoopbackServer
 
     run_dir = tmp_path / "run"
     shutil.copytree(stage1_run, run_dir)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.stage2.simstate import localize
+from pipeline.labelers.simstate.localizer import localize
 from tests.stage2.rollouts import OTHER_BOWL, TARGET, plan_step
 
 pytestmark = [pytest.mark.sim, pytest.mark.xdist_group("stage2_rollouts")]

@@ -105,3 +105,34 @@ def test_a_key_that_is_not_its_own_suite_task_and_episode_is_set_aside(tmp_path)
     bad = units[f"{SUITE}/{TASK}/{EP(1)}"].quarantine
     assert (bad.reason, bad.field) == ("key_mismatch", "key") and "bogus" in bad.detail
     assert units[f"{SUITE}/{TASK}/{EP(0)}"].localization is not None and "bogus" not in units
+
+
+def test_an_unreadable_frame_table_is_reported_by_name_and_the_duration_comes_from_the_evidence(tmp_path, caplog):
+    from pipeline.stage3.inputs import collect, context
+
+    run = tmp_path / "run"
+    build(run, n_episodes=1, n_quarantined=0, wrist=False)
+    frames = run / "stage1" / "episodes" / SUITE / TASK / EP(0) / "frames.parquet"
+    frames.write_bytes(b"not parquet")
+    [unit] = collect(run)
+    with caplog.at_level("WARNING", logger="pipeline.stage3"):
+        ctx = context(run, unit, 20, 10.0)
+    assert ctx["duration_s"] is not None  # the evidence's last step
+    assert any(str(frames) in r.getMessage() and "unreadable" in r.getMessage() for r in caplog.records)
+
+
+def test_a_bug_while_reading_media_is_not_swallowed(tmp_path, monkeypatch):
+    import pyarrow.parquet as pq
+
+    from pipeline.stage3.inputs import collect, context
+
+    run = tmp_path / "run"
+    build(run, n_episodes=1, n_quarantined=0, wrist=False)
+    [unit] = collect(run)
+
+    def broken(*a, **k):
+        raise TypeError("a programming error, not a bad file")
+
+    monkeypatch.setattr(pq, "read_table", broken)
+    with pytest.raises(TypeError):
+        context(run, unit, 20, 10.0)

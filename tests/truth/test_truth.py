@@ -77,7 +77,7 @@ def test_bench_localize_scores_simstate_from_the_cli(truth_run):
 def test_the_openai_backend_goes_through_bench_localize_over_loopback(truth_run, tmp_path):
     from pipeline.config import Config
     from pipeline.truth.bench import run as bench
-    from tests.vlm.loopback_server import LoopbackServer
+    from tests.labelers.vlm.loopback_server import LoopbackServer
 
     run, eps = truth_run
     miss = _truth(run, eps["miss"])
@@ -140,12 +140,12 @@ def test_the_transformers_backend_goes_through_bench_localize_with_a_tiny_qwen(t
 
     if not all(importlib.util.find_spec(m) for m in ("transformers", "torchvision", "torch")):
         pytest.skip("the `vlm` extra (torch, torchvision, transformers) is not installed")
-    from pipeline.vlm.torch_compat import ensure_torchvision
+    from pipeline.labelers.vlm.torch_compat import ensure_torchvision
 
     ensure_torchvision()
     from pipeline.config import Config
     from pipeline.truth.bench import run as bench
-    from tests.vlm.tiny_qwen import build_tiny_qwen
+    from tests.labelers.vlm.tiny_qwen import build_tiny_qwen
 
     run, _ = truth_run
     model = build_tiny_qwen(tmp_path / "qwen", "qwen2_5_vl")

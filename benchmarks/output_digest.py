@@ -1,0 +1,161 @@
+"""Digest every output of a run, to show that a change of code left the outputs byte-identical.
+
+Runs stages 1-3 on a config, has two reviewers accept every proposal through the real review
+server (HTTP, personal tokens, as people would), exports the annotations, builds the release,
+then writes the SHA-256 of every file of the run folder to a JSON digest. Files that hold
+wall-clock times or machine facts (logs, the review database, run summaries, done markers,
+lock files) are listed apart under `volatile` and not compared.
+
+    .venv/bin/python benchmarks/output_digest.py -c configs/smoke.yaml --out before.json
+    .venv/bin/python benchmarks/output_digest.py --compare before.json after.json
+
+The review step only talks HTTP and the CLI, so the same script drives the code before and
+after a refactor of the internals. Exit 1 when `--compare` finds a difference.
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import os
+import re
+import shutil
+import socket
+import subprocess
+import sys
+import time
+import urllib.request
+import uuid
+from pathlib import Path
+
+import yaml
+from rich.console import Console
+
+console = Console()
+REPO = Path(__file__).resolve().parents[1]
+# the CLI of the checkout this script lives in (the editable install may point elsewhere)
+RECOVER = [sys.executable, "-c", f"import sys; sys.path.insert(0, {str(REPO)!r}); from pipeline.cli import app; app()"]
+VOLATILE = re.compile(r"(\.log$|\.sqlite|\.lock$|summary\.json$|/_done/|done\.json$|config\.resolved\.yaml$"
+                      r"|\.sqlite-wal$|\.sqlite-shm$|report\.json$|/bench/)")
+
+
+def recover(*args: str, cwd: Path = REPO) -> str:
+    exe = [*RECOVER, *args]
+    r = subprocess.run(exe, cwd=cwd, capture_output=True, text=True)
+    if r.returncode != 0:
+        console.print(r.stdout[-3000:], r.stderr[-3000:])
+        raise SystemExit(f"recover {' '.join(args)} failed with {r.returncode}")
+    return r.stdout
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def call(base: str, token: str, method: str, path: str, body: dict | None = None) -> dict:
+    req = urllib.request.Request(base + path, method=method, data=json.dumps(body).encode() if body is not None else None,
+                                 headers={"Authorization": f"Bearer {token}", "Content-Type": "application/json"})
+    with urllib.request.urlopen(req, timeout=60) as r:
+        return json.loads(r.read())
+
+
+def review_all(config: Path, n_reviewers: int) -> int:
+    """Every reviewer accepts every proposal (quarantined items are flagged); returns decisions."""
+    tokens = []
+    for i in range(n_reviewers):
+        out = recover("review", "add-reviewer", f"digest_reviewer_{i}", "-c", str(config))
+        tokens.append(re.search(r"token: (\S+)", out).group(1))
+    port = free_port()
+    server = subprocess.Popen([*RECOVER, "review", "serve", "-c", str(config),
+                               "--host", "127.0.0.1", "--port", str(port), "--workers", "1"], cwd=REPO,
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    base, n = f"http://127.0.0.1:{port}", 0
+    try:
+        for _ in range(200):
+            try:
+                urllib.request.urlopen(base + "/", timeout=1)
+                break
+            except OSError:
+                time.sleep(0.2)
+        for token in tokens:
+            while (item := call(base, token, "POST", "/api/queue/next")["item"]) is not None:
+                iid = item["id"] if isinstance(item, dict) else item
+                view = call(base, token, "GET", f"/api/items/{iid}")
+                body = {"decision": "flag", "reason": "quarantined"} if view.get("quarantined") else {"decision": "accept"}
+                call(base, token, "POST", f"/api/items/{iid}/review",
+                     {**body, "version": view.get("version", 0), "idempotency_key": uuid.uuid4().hex})
+                n += 1
+    finally:
+        server.terminate()
+        server.wait(timeout=30)
+    return n
+
+
+def digest(run: Path) -> dict:
+    files, volatile = {}, []
+    for p in sorted(run.rglob("*")):
+        if not p.is_file():
+            continue
+        rel = p.relative_to(run).as_posix()
+        if VOLATILE.search("/" + rel):
+            volatile.append(rel)
+            continue
+        files[rel] = hashlib.sha256(p.read_bytes()).hexdigest()
+    return {"files": files, "volatile": volatile}
+
+
+def compare(a_path: Path, b_path: Path) -> int:
+    a, b = json.loads(a_path.read_text())["files"], json.loads(b_path.read_text())["files"]
+    only_a, only_b = sorted(set(a) - set(b)), sorted(set(b) - set(a))
+    diff = sorted(k for k in set(a) & set(b) if a[k] != b[k])
+    groups: dict[str, int] = {}
+    for k in a:
+        g = "/".join(k.split("/")[:2])
+        groups[g] = groups.get(g, 0) + 1
+    console.print(f"{len(a)} files in {a_path.name}, {len(b)} in {b_path.name}; by folder: {groups}")
+    for name, ks in (("only before", only_a), ("only after", only_b), ("different", diff)):
+        console.print(f"{name}: {len(ks)}")
+        for k in ks[:40]:
+            console.print(f"  {k}")
+    same = not (only_a or only_b or diff)
+    console.print("[green]byte-identical[/]" if same else "[red]outputs differ[/]")
+    return 0 if same else 1
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("-c", "--config", type=Path)
+    ap.add_argument("--out", type=Path, help="digest JSON to write")
+    ap.add_argument("--reviewers", type=int, default=2)
+    ap.add_argument("--fresh", action="store_true", help="delete the run folder first")
+    ap.add_argument("--compare", nargs=2, type=Path, metavar=("BEFORE", "AFTER"))
+    a = ap.parse_args()
+    if a.compare:
+        return compare(*a.compare)
+    cfg = yaml.safe_load(a.config.read_text())
+    run = Path(cfg["run"]["output_dir"])
+    run = run if run.is_absolute() else REPO / run
+    if a.fresh and run.exists():
+        shutil.rmtree(run)
+    t0 = time.perf_counter()
+    for stage in ("stage1", "stage2", "stage3"):
+        console.print(f"{stage} ...")
+        recover(stage, "-c", str(a.config.resolve()))
+    n = review_all(a.config.resolve(), a.reviewers)
+    console.print(f"{n} decisions")
+    recover("review", "export", "-c", str(a.config.resolve()))
+    recover("release", "-c", str(a.config.resolve()))
+    d = digest(run)
+    d.update(config=str(a.config), commit=subprocess.run(["git", "rev-parse", "HEAD"], cwd=REPO, capture_output=True,
+                                                         text=True).stdout.strip(), seconds=round(time.perf_counter() - t0))
+    a.out.write_text(json.dumps(d, indent=1))
+    console.print(f"{len(d['files'])} files digested ({len(d['volatile'])} volatile) -> {a.out} in {d['seconds']} s")
+    return 0
+
+
+if __name__ == "__main__":
+    os.environ.setdefault("PYTHONHASHSEED", "0")
+    sys.exit(main())
