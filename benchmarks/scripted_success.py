@@ -101,9 +101,10 @@ def markdown(summary: list[dict], note: str) -> str:
     head = "| suite | tasks | episodes (each noise) | success, zero noise | success, default noise | mean steps of successes (zero / default) |"
     lines = [head, "|---|---|---|---|---|---|"]
     for s in summary:
+        noisy = f"{s['default_success']:.0%}" if s["default_episodes"] else "-"  # none: recovery expert
         lines.append(
             f"| {s['suite']} | {s['tasks']} | {s['zero_episodes']} | {s['zero_success']:.0%} | "
-            f"{s['default_success']:.0%} | {s['zero_steps']:.0f} / {s['default_steps']:.0f} |"
+            f"{noisy} | {s['zero_steps']:.0f} / {s['default_steps']:.0f} |"
         )
     return "\n".join(lines) + f"\n\n{note}\n"
 

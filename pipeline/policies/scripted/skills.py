@@ -99,8 +99,53 @@ def grasp(ctx: Ctx, obj: str, dest: np.ndarray | None = None, choice: int = 0, h
 
 
 def place_xy(ctx: Ctx, obj: str, target: str) -> np.ndarray:
-    """Where the object's body should end up (xy): on an object's body or a region's centre."""
-    return ctx.scene.pos(target)[:2].copy()
+    """Where the object's body should end up (xy): on an object's body or a region's centre;
+    in a drawer, the point nearest its centre with open sky above the object's footprint
+    (an open bottom drawer lies partly under the drawers above it)."""
+    s = ctx.scene
+    xy = s.pos(target)[:2].copy()
+    if not s.env.is_region(target):
+        return xy
+    r = s.env.region(target)
+    drawer = bool(r["joints"])
+    half = np.abs(r["mat"]) @ r["size"]
+    top = r["pos"][2] + half[2]
+    size = s.box(obj).size[:2]
+    rad = 0.5 * float(max(size)) + 0.01  # sky over the whole footprint (a bowl rim hits the face above)
+    # other objects already standing in the region (the second moka pot on a stove)
+    reach = 0.5 * float(max(size))  # objects within this of the region count
+    others = [s.box(o) for o in s.env.object_names if o != obj]
+    others = [b for b in others if np.all(b.hi[:2] > xy - half[:2] - reach) and np.all(b.lo[:2] < xy + half[:2] + reach)]
+    if s.env.region(target)["parent"] in s.env.object_names:
+        others = []  # a container object (a basket): things may share its middle
+    if not drawer and not others:
+        return xy
+    best = None
+    for fx in np.linspace(-1.0, 1.0, 11):
+        for fy in np.linspace(-1.0, 1.0, 11):
+            p = r["pos"][:2] + half[:2] * [fx, fy]
+            # overlap (m^2) of the footprint with objects already there: least wins
+            lo, hi = p - size / 2, p + size / 2
+            crowd = sum(float(np.prod(np.clip(np.minimum(hi, b.hi[:2]) - np.maximum(lo, b.lo[:2]), 0, None)))
+                        for b in others)
+            probes = [p + d for d in ([0, 0], [rad, 0], [-rad, 0], [0, rad], [0, -rad])]
+            if drawer and any((h := s.env.ray_down(q, top + 0.5, top, ignore=obj)) is not None and h > top for q in probes):
+                continue
+            d = 100 * crowd + float(np.linalg.norm(p - xy))
+            if best is None or d < best[0]:
+                best = (d, p)
+    return xy if best is None else best[1]
+
+
+def support_ceiling(env, target: str) -> float:
+    """Boxes whose top is at or above this height cannot support an object put `in`/`on`
+    `target`: for a region, a little above its top; for a region inside a drawer, its top
+    itself (the cabinet's own top sits just above the top drawer's region)."""
+    if not env.is_region(target):
+        return np.inf
+    r = env.region(target)
+    top = r["pos"][2] + float(np.abs(r["mat"] @ r["size"])[2])
+    return top if r["joints"] else top + 0.03
 
 
 def destination(ctx: Ctx, obj: str, target: str) -> np.ndarray:
@@ -109,21 +154,13 @@ def destination(ctx: Ctx, obj: str, target: str) -> np.ndarray:
     box = s.box(obj)
     dest = place_xy(ctx, obj, target)
     foot = dest + (box.centre[:2] - s.env.object_pose(obj)[0][:2])
-    below = np.inf
-    if s.env.is_region(target):
-        r = s.env.region(target)
-        below = r["pos"][2] + float(np.abs(r["mat"] @ r["size"])[2]) + 0.03
+    below = support_ceiling(s.env, target)
     radius = 0.6 * float(min(box.size[0], box.size[1])) / 2
     return np.array([dest[0], dest[1], s.support_top(foot, radius, {obj}, below=below)])
 
 
 def place(ctx: Ctx, obj: str, target: str) -> Plan:
-    env = ctx.scene.env
-    below = np.inf
-    if env.is_region(target):
-        r = env.region(target)
-        below = r["pos"][2] + float(np.abs(r["mat"] @ r["size"])[2]) + 0.03
-    yield from place_at(ctx, obj, place_xy(ctx, obj, target), below)
+    yield from place_at(ctx, obj, place_xy(ctx, obj, target), support_ceiling(ctx.scene.env, target))
 
 
 def place_at(ctx: Ctx, obj: str, xy: np.ndarray, below: float = np.inf) -> Plan:

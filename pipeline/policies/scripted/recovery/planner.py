@@ -13,10 +13,12 @@ A subgoal that failed MAX_TRIES times, or a budget of steps spent, ends with a r
 
 from __future__ import annotations
 
+import os
 from collections import Counter
 from collections.abc import Callable
 
 from pipeline.policies.scripted import articulated
+from pipeline.policies.scripted.grasps import plan_grasp
 from pipeline.policies.scripted.planner import order_goal
 from pipeline.policies.scripted.recovery import checks
 from pipeline.policies.scripted.recovery.back_out import back_out
@@ -28,7 +30,13 @@ from pipeline.policies.scripted.recovery.variation import RetryNoise
 from pipeline.policies.scripted.skills import Ctx, Plan, destination, free_hand
 
 MAX_TRIES = 4  # attempts per subgoal (each one different)
-MAX_ASIDE = 2  # times one obstruction is moved aside
+MAX_ASIDE = 2
+FLAT_M = 0.04  # objects lower than this are grasped with the palm near the table  # times one obstruction is moved aside
+
+
+def _debug(*a) -> None:
+    if os.environ.get("RECOVERY_DEBUG"):
+        print("[recovery]", *a, flush=True)
 
 
 def next_subgoal(ctx: Ctx, steps: list[tuple[str, ...]], goal: list[tuple[str, ...]]) -> tuple[str, ...] | None:
@@ -56,7 +64,8 @@ def recover(ctx: Ctx, now: Callable[[], int], budget: int | None) -> Plan:
     steps = order_goal(goal, lambda region: articulated.openable(s.env, region))
     tries: Counter = Counter()
     aside: Counter = Counter()
-    keep = {n for c in goal for n in c[1:]}
+    keep = {n for c in goal for n in c[1:]}  # never moved aside: goal objects, targets and
+    keep |= {s.env.region(n)["parent"] for n in list(keep) if s.env.is_region(n)}  # their owners
     while not s.env.goal_satisfied():
         if budget is not None and now() >= budget:
             raise GiveUp(GiveUpReason.TIMEOUT, f"step budget {budget} spent")
@@ -79,10 +88,26 @@ def recover(ctx: Ctx, now: Callable[[], int], budget: int | None) -> Plan:
         yield from back_out(ctx)
         if sub[0] in ("on", "in") and held != sub[1]:
             dest = destination(ctx, sub[1], sub[2])
-            block = [b for b in checks.blockers(s, sub[1], dest[:2], keep) if aside[b] < MAX_ASIDE]
+            in_way = checks.blockers(s, sub[1], dest, keep)
+            # whatever stands where the palm goes down: after a failed grasp, or at once for
+            # a flat object (the palm then comes down low, beside its neighbours)
+            if tries[sub] > 0 or s.box(sub[1]).size[2] < FLAT_M:
+                in_way += checks.grasp_blockers(s, sub[1], plan_grasp(s, sub[1], dest, tries[sub]), keep)
+            block = [b for b in in_way if aside[b] < MAX_ASIDE]
             if block:
+                _debug("aside", block)
                 aside[block[0]] += 1
                 yield from put_aside(ctx, block[0], aside[block[0]] - 1)
+                continue
+        _debug("subgoal", sub, "try", tries[sub], "held", held)
+        if sub[0] == "open" and (joint := articulated.part_joint(s.env, sub[1])) is not None:
+            # an object the opened drawer would overhang cannot be grasped afterwards: first aside
+            sweep = checks.drawer_sweep(s, joint)
+            under = [m for m in movers if sweep is not None and checks.under_sweep(s, m, sweep) and aside[m] < MAX_ASIDE]
+            if under:
+                _debug("aside before opening", under)
+                aside[under[0]] += 1
+                yield from put_aside(ctx, under[0], aside[under[0]] - 1, forbid=[sweep])
                 continue
         if tries[sub] >= MAX_TRIES:
             raise GiveUp(GiveUpReason.RETRIES_EXHAUSTED, f"{' '.join(sub)} failed {MAX_TRIES} times")
