@@ -52,3 +52,18 @@ def test_the_plain_expert_still_certifies_when_chosen(run):
 def test_certify_tries_zero_skips_the_certificate(run):
     (row,) = build(release_config(run, certify_tries=0))
     assert (row.certified, row.certify_tries, row.certify_reason) == (None, 0, None)
+
+
+def test_an_expert_that_crashes_on_a_scene_leaves_it_uncertified_with_the_error(run, monkeypatch):
+    class Broken:
+        name, cameras, image_size = "broken", (), 64
+
+        def reset(self, task, seed):
+            pass
+
+        def act(self, obs):
+            raise RuntimeError("planner bug")
+
+    monkeypatch.setattr(certify, "expert_factory", lambda kind, cfg: lambda env, seed, variation: Broken())
+    (row,) = build(release_config(run, certify_tries=1, certify_horizon=50))
+    assert (row.certified, row.certify_reason) == (False, "expert_error: RuntimeError: planner bug")
