@@ -4,7 +4,9 @@ Runs stages 1-3 on a config, has two reviewers accept every proposal through the
 server (HTTP, personal tokens, as people would), exports the annotations, builds the release,
 then writes the SHA-256 of every file of the run folder to a JSON digest. Files that hold
 wall-clock times or machine facts (logs, the review database, run summaries, done markers,
-lock files) are listed apart under `volatile` and not compared.
+lock files) are listed apart under `volatile` and not compared; JSON and Parquet files are
+also hashed without their wall-clock fields (`CLOCK_KEYS`: a step's wall time, a review's
+time stamps), and a file that differs only there is reported as such.
 
     .venv/bin/python benchmarks/output_digest.py -c configs/smoke.yaml --out before.json
     .venv/bin/python benchmarks/output_digest.py --compare before.json after.json
@@ -94,8 +96,42 @@ def review_all(config: Path, n_reviewers: int) -> int:
     return n
 
 
+# wall-clock fields inside otherwise deterministic files: compared with these removed
+CLOCK_KEYS = {"wall_time_s", "at", "finalized_at", "built_at", "created_at", "updated_at", "latency_s"}
+
+
+def _strip(x):
+    if isinstance(x, dict):
+        return {k: _strip(v) for k, v in x.items() if k not in CLOCK_KEYS}
+    if isinstance(x, list):
+        return [_strip(v) for v in x]
+    if isinstance(x, str) and x[:1] in "{[":
+        try:
+            return _strip(json.loads(x))
+        except ValueError:
+            return x
+    return x
+
+
+def clock_free_hash(p: Path) -> str | None:
+    """Hash of a JSON or Parquet file without its wall-clock fields (None for other files)."""
+    if p.suffix == ".json":
+        try:
+            data = json.loads(p.read_text())
+        except ValueError:
+            return None
+        return hashlib.sha256(json.dumps(_strip(data), sort_keys=True).encode()).hexdigest()
+    if p.suffix == ".parquet":
+        import pyarrow.parquet as pq
+
+        t = pq.read_table(p)
+        rows = _strip(t.drop_columns([c for c in t.column_names if c in CLOCK_KEYS]).to_pylist())
+        return hashlib.sha256((t.schema.to_string() + json.dumps(rows, sort_keys=True, default=str)).encode()).hexdigest()
+    return None
+
+
 def digest(run: Path) -> dict:
-    files, volatile = {}, []
+    files, clock_free, volatile = {}, {}, []
     for p in sorted(run.rglob("*")):
         if not p.is_file():
             continue
@@ -104,19 +140,26 @@ def digest(run: Path) -> dict:
             volatile.append(rel)
             continue
         files[rel] = hashlib.sha256(p.read_bytes()).hexdigest()
-    return {"files": files, "volatile": volatile}
+        if (h := clock_free_hash(p)) is not None:
+            clock_free[rel] = h
+    return {"files": files, "clock_free": clock_free, "volatile": volatile}
 
 
 def compare(a_path: Path, b_path: Path) -> int:
-    a, b = json.loads(a_path.read_text())["files"], json.loads(b_path.read_text())["files"]
+    da, db = json.loads(a_path.read_text()), json.loads(b_path.read_text())
+    a, b = da["files"], db["files"]
+    ca, cb = da.get("clock_free", {}), db.get("clock_free", {})
     only_a, only_b = sorted(set(a) - set(b)), sorted(set(b) - set(a))
-    diff = sorted(k for k in set(a) & set(b) if a[k] != b[k])
+    raw_diff = sorted(k for k in set(a) & set(b) if a[k] != b[k])
+    clock = [k for k in raw_diff if k in ca and ca.get(k) == cb.get(k)]
+    diff = [k for k in raw_diff if k not in clock]
     groups: dict[str, int] = {}
     for k in a:
         g = "/".join(k.split("/")[:2])
         groups[g] = groups.get(g, 0) + 1
     console.print(f"{len(a)} files in {a_path.name}, {len(b)} in {b_path.name}; by folder: {groups}")
-    for name, ks in (("only before", only_a), ("only after", only_b), ("different", diff)):
+    for name, ks in (("only before", only_a), ("only after", only_b), ("different only in wall-clock fields", clock),
+                     ("different", diff)):
         console.print(f"{name}: {len(ks)}")
         for k in ks[:40]:
             console.print(f"  {k}")
@@ -132,9 +175,15 @@ def main() -> int:
     ap.add_argument("--reviewers", type=int, default=2)
     ap.add_argument("--fresh", action="store_true", help="delete the run folder first")
     ap.add_argument("--compare", nargs=2, type=Path, metavar=("BEFORE", "AFTER"))
+    ap.add_argument("--digest-only", type=Path, metavar="RUN", help="digest an existing run folder, run nothing")
     a = ap.parse_args()
     if a.compare:
         return compare(*a.compare)
+    if a.digest_only:
+        d = digest(a.digest_only)
+        a.out.write_text(json.dumps({**d, "run": str(a.digest_only)}, indent=1))
+        console.print(f"{len(d['files'])} files digested -> {a.out}")
+        return 0
     cfg = yaml.safe_load(a.config.read_text())
     run = Path(cfg["run"]["output_dir"])
     run = run if run.is_absolute() else REPO / run

@@ -1,7 +1,9 @@
 """Typed records at every stage boundary, and the run folder layout.
 
 Raw data never changes; labels sit beside it, keyed by the stable episode key
-`<suite>/<task_name>/<episode_id>`. Every artifact carries `schema_version`.
+`<suite>/<task_name>/<episode_id>`. Every artifact carries `schema_version`. Closed sets of
+values are the string enums of `pipeline.vocab`; each Parquet file's schema is derived from
+its row model by `pipeline.arrow.arrow_schema` (never written by hand).
 
 Run folder (`run.output_dir`):
     config.resolved.yaml                 the validated config of the last stage run
@@ -21,28 +23,16 @@ Run folder (`run.output_dir`):
 
 from __future__ import annotations
 
-from enum import Enum
+from typing import Annotated
 
 import pyarrow as pa
+from annotated_types import Len
 from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from pipeline import SCHEMA_VERSION
-
-
-class Level(str, Enum):
-    L1 = "L1"  # action retry
-    L2 = "L2"  # action adaptation
-    L3 = "L3"  # object state recovery
-    L4 = "L4"  # environmental recovery
-
-
-class Category(str, Enum):
-    grasp_failure = "grasp_failure"
-    placement_failure = "placement_failure"
-    object_displacement = "object_displacement"
-    collision_or_interaction_failure = "collision_or_interaction_failure"
-    environmental_obstruction = "environmental_obstruction"
-    other = "other"
+from pipeline.arrow import F32, I64, JSON_TEXT, arrow_schema
+# the vocabularies live in pipeline.vocab; importing them from here keeps working
+from pipeline.vocab import Category, Decision, EventKind, Level, QuarantineReason, Resolution  # noqa: F401
 
 
 class Record(BaseModel):
@@ -73,8 +63,8 @@ class EpisodeRecord(Record):
     init_state: int
     policy: str
     policy_kind: str
-    policy_params: dict = Field(default_factory=dict)
-    seed: int
+    policy_params: Annotated[dict, JSON_TEXT] = Field(default_factory=dict)
+    seed: I64
     chunk_size: int
     horizon: int
     control_hz: int = Field(20, gt=0)
@@ -96,34 +86,7 @@ class EpisodeRecord(Record):
 # The stage 1 manifest (stage1/episodes.parquet): one row per EpisodeRecord, same column
 # names; `policy_params` is stored as a JSON string and `videos` as a map camera -> file.
 # Read it with `read_episodes` to get EpisodeRecords back.
-EPISODE_SCHEMA = pa.schema(
-    [
-        pa.field("schema_version", pa.int32(), nullable=False),
-        pa.field("suite", pa.string(), nullable=False),
-        pa.field("task", pa.string(), nullable=False),
-        pa.field("task_index", pa.int32(), nullable=False),
-        pa.field("instruction", pa.string(), nullable=False),
-        pa.field("episode_id", pa.string(), nullable=False),
-        pa.field("init_state", pa.int32(), nullable=False),
-        pa.field("policy", pa.string(), nullable=False),
-        pa.field("policy_kind", pa.string(), nullable=False),
-        pa.field("policy_params", pa.string(), nullable=False),  # JSON
-        pa.field("seed", pa.int64(), nullable=False),
-        pa.field("chunk_size", pa.int32(), nullable=False),
-        pa.field("horizon", pa.int32(), nullable=False),
-        pa.field("control_hz", pa.int32(), nullable=False),
-        pa.field("settle_steps", pa.int32(), nullable=False),
-        pa.field("steps", pa.int32(), nullable=False),
-        pa.field("success", pa.bool_(), nullable=False),
-        pa.field("first_success_step", pa.int32()),
-        pa.field("wall_time_s", pa.float64(), nullable=False),
-        pa.field("state_dim", pa.int32(), nullable=False),
-        pa.field("path", pa.string(), nullable=False),
-        pa.field("videos", pa.map_(pa.string(), pa.string()), nullable=False),
-        pa.field("video_fps", pa.int32()),
-    ],
-    metadata={"schema_version": str(SCHEMA_VERSION)},
-)
+EPISODE_SCHEMA = arrow_schema(EpisodeRecord)
 
 
 def episodes_table(records: list[EpisodeRecord]) -> pa.Table:
@@ -208,29 +171,31 @@ def read_episode_rows(path) -> tuple[list[EpisodeRecord], list[ManifestProblem]]
 
 
 # Per-step log of one episode. Row t describes the step that applied action t to state t.
-STEP_SCHEMA = pa.schema(
-    [
-        pa.field("step", pa.int32(), nullable=False),
-        pa.field("action", pa.list_(pa.float32(), 7), nullable=False),
-        pa.field("eef_pos", pa.list_(pa.float32(), 3), nullable=False),
-        pa.field("eef_quat", pa.list_(pa.float32(), 4), nullable=False),  # w, x, y, z
-        pa.field("gripper_qpos", pa.list_(pa.float32(), 2), nullable=False),
-        pa.field("goal", pa.bool_(), nullable=False),  # goal holds after this step
-        pa.field("query", pa.bool_(), nullable=False),  # a new chunk was requested at this step
-    ],
-    metadata={"schema_version": str(SCHEMA_VERSION)},
-)
+class StepRow(BaseModel):
+    """One row of `steps.parquet`: the step that applied action t to state t."""
+
+    step: int
+    action: Annotated[list[F32], Field(min_length=7, max_length=7)]
+    eef_pos: Annotated[list[F32], Field(min_length=3, max_length=3)]
+    eef_quat: Annotated[list[F32], Field(min_length=4, max_length=4)]  # w, x, y, z
+    gripper_qpos: Annotated[list[F32], Field(min_length=2, max_length=2)]
+    goal: bool  # goal holds after this step
+    query: bool  # a new chunk was requested at this step
+
+
+STEP_SCHEMA = arrow_schema(StepRow)
 
 # Frame <-> step table of a rendered video: frame i shows the state *before* action `step`
 # (the last frame may show the final state, step == steps). time_s = step / control_hz.
-FRAME_SCHEMA = pa.schema(
-    [
-        pa.field("frame", pa.int32(), nullable=False),
-        pa.field("step", pa.int32(), nullable=False),
-        pa.field("time_s", pa.float64(), nullable=False),
-    ],
-    metadata={"schema_version": str(SCHEMA_VERSION)},
-)
+class FrameRow(BaseModel):
+    """One row of `frames.parquet`."""
+
+    frame: int
+    step: int
+    time_s: float
+
+
+FRAME_SCHEMA = arrow_schema(FrameRow)
 
 
 def step_at_time(time_s: float, control_hz: int = 20) -> int:
@@ -244,8 +209,7 @@ class SimEvent(Record):
 
     step: int
     time_s: float
-    kind: str  # grasp_missed | grasp_lost | object_dropped | object_toppled | unintended_displacement
-    #            | robot_contact_non_target | object_collision | goal_regression | ...
+    kind: EventKind
     object: str | None = None
     other: str | None = None
     detail: str = ""
@@ -301,7 +265,7 @@ class QuarantineEntry(Record):
     key: str
     stage: str  # stage2 | stage3
     source: str
-    reason: str  # no_json | schema | out_of_range | truncated | backend_error | ...
+    reason: QuarantineReason
     detail: str = ""
     # a bad input: the file (run-relative when it lies in the run folder) and the field at fault
     file: str | None = None
@@ -319,25 +283,26 @@ class QuarantineEntry(Record):
 
 
 # Per-step simulator evidence of an episode, shown to reviewers and used by simstate rules.
-EVIDENCE_SCHEMA = pa.schema(
-    [
-        pa.field("step", pa.int32(), nullable=False),
-        pa.field("time_s", pa.float64(), nullable=False),
-        pa.field("gripper_opening", pa.float32(), nullable=False),
-        pa.field("grasped", pa.string(), nullable=False),  # object held between the fingers, or ""
-        pa.field("contacts", pa.list_(pa.string()), nullable=False),  # "a|b" pairs, sorted names
-        pa.field("displacement", pa.map_(pa.string(), pa.float32()), nullable=False),  # m from start
-        pa.field("goal_progress", pa.float32(), nullable=False),  # share of goal conjuncts true
-        # added by stage 2 (see pipeline/evidence.py): what the simstate rules also need
-        pa.field("gripper_command", pa.float32(), nullable=False),  # gripper action (+1 close)
-        pa.field("lift", pa.map_(pa.string(), pa.float32()), nullable=False),  # m, z - start z
-        pa.field("tilt_deg", pa.map_(pa.string(), pa.float32()), nullable=False),  # up axis vs start
-        pa.field("speed", pa.map_(pa.string(), pa.float32()), nullable=False),  # m/s, free joint
-        pa.field("eef_distance", pa.map_(pa.string(), pa.float32()), nullable=False),  # grip site, m
-        pa.field("position", pa.map_(pa.string(), pa.list_(pa.float32(), 3)), nullable=False),  # world xyz
-    ],
-    metadata={"schema_version": str(SCHEMA_VERSION)},
-)
+class EvidenceRow(BaseModel):
+    """One step of an episode's evidence file (objects by name in the maps)."""
+
+    step: int
+    time_s: float
+    gripper_opening: F32
+    grasped: str  # object held between the fingers, or ""
+    contacts: list[str]  # "a|b" pairs, sorted names
+    displacement: dict[str, F32]  # m from start
+    goal_progress: F32  # share of goal conjuncts true
+    # added by stage 2 (see pipeline/evidence.py): what the simstate rules also need
+    gripper_command: F32  # gripper action (+1 close)
+    lift: dict[str, F32]  # m, z - start z
+    tilt_deg: dict[str, F32]  # up axis vs start
+    speed: dict[str, F32]  # m/s, free joint
+    eef_distance: dict[str, F32]  # grip site, m
+    position: dict[str, Annotated[list[F32], Len(3, 3)]]  # world xyz
+
+
+EVIDENCE_SCHEMA = arrow_schema(EvidenceRow)
 
 
 # ---- stage 3: characterization --------------------------------------------------------
@@ -368,7 +333,7 @@ class AnnotationProposal(Record):
 
 class AnnotationReview(Record):
     reviewer: str
-    decision: str  # accept | revise | flag
+    decision: Decision
     fail_time_s: float | None = None
     fail_step: int | None = None
     recovery_level: Level | None = None
@@ -400,7 +365,7 @@ class Annotation(Record):
     recovery_level: Level
     failure_category: Category
     recovery_action: str = Field(min_length=1, max_length=200)
-    resolution: str  # agreed | adjudicated
+    resolution: Resolution  # agreed | adjudicated (excluded items are never exported)
     quarantined: bool = False  # the model's output was quarantined; people supplied the values
     quarantine_reason: str | None = None
     model_proposal: AnnotationProposal

@@ -1,5 +1,5 @@
-"""Recovery metrics, as pure functions of evaluation rows (dicts with `records.EVAL_SCHEMA`
-columns, e.g. from `records.read_rows`). Nothing here touches the simulator.
+"""Recovery metrics, as pure functions of evaluation rows (`records.MetricRow`, e.g. from
+`records.read_rows`). Nothing here touches the simulator.
 
 Definitions (the reference's, with the choices the issue left open made explicit):
 - RSR (recovery success rate) of a subset = successes / trials over the `scene`-mode rows
@@ -23,8 +23,10 @@ from __future__ import annotations
 
 import math
 from collections import defaultdict
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable
 from dataclasses import dataclass
+
+from pipeline.eval.records import MetricRow
 
 NAN = float("nan")
 
@@ -33,13 +35,16 @@ def _value(v):
     return getattr(v, "value", v)  # str enums compare by value
 
 
-def select(rows: Iterable[Mapping], **where) -> list[Mapping]:
+def select(rows: Iterable[MetricRow], **where) -> list[MetricRow]:
     """Rows whose columns equal every given value (a list/tuple/set value means "any of")."""
+    unknown = set(where) - set(MetricRow.model_fields)
+    if unknown:
+        raise ValueError(f"no metric column {sorted(unknown)}; columns: {list(MetricRow.model_fields)}")
     out = []
     for r in rows:
         ok = True
         for k, want in where.items():
-            have = _value(r.get(k))
+            have = _value(getattr(r, k))
             if isinstance(want, (list, tuple, set, frozenset)):
                 ok = have in {_value(w) for w in want}
             else:
@@ -51,27 +56,27 @@ def select(rows: Iterable[Mapping], **where) -> list[Mapping]:
     return out
 
 
-def success_rate(rows: Iterable[Mapping]) -> float:
+def success_rate(rows: Iterable[MetricRow]) -> float:
     rows = list(rows)
     if not rows:
         return NAN
-    return sum(bool(r["success"]) for r in rows) / len(rows)
+    return sum(r.success for r in rows) / len(rows)
 
 
-def rsr(rows: Iterable[Mapping], **where) -> float:
+def rsr(rows: Iterable[MetricRow], **where) -> float:
     """Recovery success rate over the scene trials matching `where`; NaN when none match."""
     return success_rate(select(rows, mode="scene", **where))
 
 
-def task_rates(rows: Iterable[Mapping], **where) -> dict[tuple[str, str], float]:
+def task_rates(rows: Iterable[MetricRow], **where) -> dict[tuple[str, str], float]:
     """R_k: (suite, task) -> RSR of that task's scene trials matching `where`."""
-    by_task: dict[tuple[str, str], list[Mapping]] = defaultdict(list)
+    by_task: dict[tuple[str, str], list[MetricRow]] = defaultdict(list)
     for r in select(rows, mode="scene", **where):
-        by_task[(r["suite"], r["task"])].append(r)
+        by_task[(r.suite, r.task)].append(r)
     return {k: success_rate(v) for k, v in sorted(by_task.items())}
 
 
-def rc(rows: Iterable[Mapping], **where) -> float:
+def rc(rows: Iterable[MetricRow], **where) -> float:
     """Recovery consistency 1 - population std of R_k over tasks; NaN with no task."""
     rates = list(task_rates(rows, **where).values())
     if not rates:
@@ -90,16 +95,16 @@ class RDResult:
     scenes: int  # matched scenes
 
 
-def rd(rows: Iterable[Mapping], epsilon: float, **where) -> RDResult:
+def rd(rows: Iterable[MetricRow], epsilon: float, **where) -> RDResult:
     """Recovery degradation from the RD reruns matching `where` (matched scenes only)."""
     if epsilon <= 0:
         raise ValueError(f"epsilon must be > 0, got {epsilon}")
-    by_scene: dict[str, dict[str, list[Mapping]]] = defaultdict(lambda: {"pre": [], "post": []})
+    by_scene: dict[str, dict[str, list[MetricRow]]] = defaultdict(lambda: {"pre": [], "post": []})
     for r in select(rows, mode="rd", **where):
-        phase = _value(r["rd_phase"])
+        phase = _value(r.rd_phase)
         if phase not in ("pre", "post"):
-            raise ValueError(f"rd row of scene {r['scene_id']} has rd_phase {phase!r}, need pre or post")
-        by_scene[r["scene_id"]][phase].append(r)
+            raise ValueError(f"rd row of scene {r.scene_id} has rd_phase {phase!r}, need pre or post")
+        by_scene[r.scene_id][phase].append(r)
     matched = [v for v in by_scene.values() if v["pre"] and v["post"]]
     pre = [r for v in matched for r in v["pre"]]
     post = [r for v in matched for r in v["post"]]
@@ -109,7 +114,7 @@ def rd(rows: Iterable[Mapping], epsilon: float, **where) -> RDResult:
     return RDResult(1.0 - (m_post + epsilon) / (m_pre + epsilon), m_pre, m_post, len(pre), len(post), len(matched))
 
 
-def counts(rows: Iterable[Mapping], **where) -> tuple[int, int]:
+def counts(rows: Iterable[MetricRow], **where) -> tuple[int, int]:
     """(successes, trials) of the scene trials matching `where`."""
     chosen = select(rows, mode="scene", **where)
-    return sum(bool(r["success"]) for r in chosen), len(chosen)
+    return sum(r.success for r in chosen), len(chosen)

@@ -13,29 +13,30 @@ the rows. `unit_id` is a flat, file-safe name unique within a run.
 from __future__ import annotations
 
 import re
-from enum import Enum
+from enum import StrEnum
 from pathlib import Path
 
 import pyarrow as pa
 import pyarrow.parquet as pq
-from pydantic import Field
+from pydantic import ConfigDict, Field
 
-from pipeline import SCHEMA_VERSION
+from pipeline.arrow import F32, I64, arrow_schema
 from pipeline.atomic import write_with
 from pipeline.records import Record
+from pipeline.vocab import Category, Level
 
 
-class GripperCondition(str, Enum):
+class GripperCondition(StrEnum):
     open = "open"
     closed = "closed"
 
 
-class TrialMode(str, Enum):
+class TrialMode(StrEnum):
     scene = "scene"  # from a recovery scene: the RSR / RC population
     rd = "rd"  # from a state along the original failed rollout: the RD population
 
 
-class RDPhase(str, Enum):
+class RDPhase(StrEnum):
     pre = "pre"  # start state before the failure onset
     post = "post"  # start state at or after the onset
 
@@ -48,14 +49,14 @@ class EvalEpisode(Record):
     instruction: str
     episode_id: str  # the failed source episode
     scene_step: int  # failure onset step of the source episode
-    level: str | None = None  # L1..L4 from the release manifest; None when unlabeled
-    category: str | None = None
+    level: Level | None = None  # from the release manifest; None when unlabeled
+    category: Category | None = None
     policy: str
     policy_kind: str
     gripper: GripperCondition
     trial: int
-    seed: int  # the run seed; trial randomness derives from (seed, scene_id, trial)
-    policy_seed: int
+    seed: I64  # the run seed; trial randomness derives from (seed, scene_id, trial)
+    policy_seed: I64
     chunk_size: int
     horizon: int
     temporal_context: str = "none"
@@ -69,8 +70,8 @@ class EvalEpisode(Record):
     success: bool
     first_success_step: int | None = None
     wall_time_s: float
-    actions: list[list[float]] = Field(default_factory=list)  # (steps, 7)
-    eef_pos: list[list[float]] = Field(default_factory=list)  # (steps + 1, 3), row 0 = start
+    actions: list[list[F32]] = Field(default_factory=list)  # (steps, 7)
+    eef_pos: list[list[F32]] = Field(default_factory=list)  # (steps + 1, 3), row 0 = start
 
     def unit_id(self) -> str:
         return unit_id(self.policy, self.chunk_size, self.mode.value, self.scene_id, self.gripper.value,
@@ -85,43 +86,7 @@ def unit_id(policy: str, chunk: int, mode: str, scene_id: str, gripper: str, tri
     return re.sub(r"[^A-Za-z0-9._-]+", "_", "__".join(parts).replace("/", "__"))
 
 
-_F32_LIST = pa.list_(pa.float32())
-EVAL_SCHEMA = pa.schema(
-    [
-        pa.field("schema_version", pa.int32(), nullable=False),
-        pa.field("mode", pa.string(), nullable=False),
-        pa.field("scene_id", pa.string(), nullable=False),
-        pa.field("suite", pa.string(), nullable=False),
-        pa.field("task", pa.string(), nullable=False),
-        pa.field("instruction", pa.string(), nullable=False),
-        pa.field("episode_id", pa.string(), nullable=False),
-        pa.field("scene_step", pa.int32(), nullable=False),
-        pa.field("level", pa.string()),
-        pa.field("category", pa.string()),
-        pa.field("policy", pa.string(), nullable=False),
-        pa.field("policy_kind", pa.string(), nullable=False),
-        pa.field("gripper", pa.string(), nullable=False),
-        pa.field("trial", pa.int32(), nullable=False),
-        pa.field("seed", pa.int64(), nullable=False),
-        pa.field("policy_seed", pa.int64(), nullable=False),
-        pa.field("chunk_size", pa.int32(), nullable=False),
-        pa.field("horizon", pa.int32(), nullable=False),
-        pa.field("temporal_context", pa.string(), nullable=False),
-        pa.field("offsets", pa.map_(pa.string(), pa.list_(pa.float64(), 2)), nullable=False),
-        pa.field("gripper_settle_steps", pa.int32(), nullable=False),
-        pa.field("init_eef_drift_m", pa.float64(), nullable=False),
-        pa.field("init_gripper_opening", pa.float64(), nullable=False),
-        pa.field("rd_phase", pa.string()),
-        pa.field("rd_start_step", pa.int32()),
-        pa.field("steps", pa.int32(), nullable=False),
-        pa.field("success", pa.bool_(), nullable=False),
-        pa.field("first_success_step", pa.int32()),
-        pa.field("wall_time_s", pa.float64(), nullable=False),
-        pa.field("actions", pa.list_(_F32_LIST), nullable=False),
-        pa.field("eef_pos", pa.list_(_F32_LIST), nullable=False),
-    ],
-    metadata={"schema_version": str(SCHEMA_VERSION)},
-)
+EVAL_SCHEMA = arrow_schema(EvalEpisode)
 
 
 def to_row(ep: EvalEpisode) -> dict:
@@ -139,14 +104,33 @@ def write_episodes(path: str | Path, episodes: list[EvalEpisode]) -> None:
     write_with(path, lambda p: pq.write_table(table, p))
 
 
-def read_rows(path: str | Path, with_trajectory: bool = False) -> list[dict]:
-    """Rows as plain dicts (what `metrics` takes); trajectories only when asked (large)."""
-    columns = None if with_trajectory else [f.name for f in EVAL_SCHEMA if f.name not in ("actions", "eef_pos")]
-    rows = pq.read_table(path, columns=columns).to_pylist()
-    for r in rows:
-        r["offsets"] = {k: tuple(v) for k, v in (r["offsets"] or [])}
-    return rows
+class MetricRow(Record):
+    """A trial as the metrics and the report read it: the columns of an EvalEpisode they use."""
+
+    model_config = ConfigDict(extra="ignore")  # a row read from the file has every column
+
+    mode: TrialMode = TrialMode.scene
+    scene_id: str
+    suite: str
+    task: str
+    level: Level | None = None
+    category: Category | None = None
+    policy: str
+    policy_kind: str | None = None  # the report marks the experts as reference rows
+    chunk_size: int
+    gripper: GripperCondition
+    rd_phase: RDPhase | None = None
+    success: bool
+
+
+def read_rows(path: str | Path) -> list[MetricRow]:
+    """The trials of an episodes file as MetricRows (the trajectories are not read)."""
+    columns = [c for c in MetricRow.model_fields if c in EVAL_SCHEMA.names]
+    return [MetricRow.model_validate(r) for r in pq.read_table(path, columns=columns).to_pylist()]
 
 
 def read_episodes(path: str | Path) -> list[EvalEpisode]:
-    return [EvalEpisode.model_validate(r) for r in read_rows(path, with_trajectory=True)]
+    rows = pq.read_table(path).to_pylist()
+    for r in rows:
+        r["offsets"] = {k: tuple(v) for k, v in (r["offsets"] or [])}
+    return [EvalEpisode.model_validate(r) for r in rows]

@@ -1,6 +1,6 @@
 """Evaluation report: markdown tables, `metrics.json` and PNG figures, from rows only.
 
-Inputs: evaluation rows (`records.read_rows`), the `EvalConfig` (epsilon, chunk sizes).
+Inputs: evaluation rows (`records.MetricRow`, from `records.read_rows`), the `EvalConfig` (epsilon, chunk sizes).
 Outputs in `out`: `report.md`; `metrics.json` (NaN written as null); `rsr_heatmap.png`
 (RSR per suite x level, one panel per policy); `gripper.png` (open vs closed);
 `chunk_sweep.png` (RSR per chunk size, when more than one was run).
@@ -17,8 +17,10 @@ from pathlib import Path
 from pipeline.atomic import write_json, write_text, write_with
 from pipeline.config import SUITES, EvalConfig
 from pipeline.eval import metrics as M
+from pipeline.eval.records import MetricRow
+from pipeline.vocab import Level
 
-LEVELS = ("L1", "L2", "L3", "L4")
+LEVELS = tuple(Level)  # the main table's columns, always
 
 
 def pct(x: float) -> str:
@@ -41,8 +43,8 @@ def _ordered(values, order) -> list:
 
 def _levels(rows) -> list[str | None]:
     """L1..L4 always (the main table's columns), then any other level, then unlabeled."""
-    lv = list(LEVELS) + [v for v in _ordered({r["level"] for r in rows}, LEVELS) if v not in LEVELS]
-    return lv + ([None] if any(r["level"] is None for r in rows) else [])
+    lv = list(LEVELS) + [v for v in _ordered({r.level for r in rows}, LEVELS) if v not in LEVELS]
+    return lv + ([None] if any(r.level is None for r in rows) else [])
 
 
 def _table(header: list[str], body: list[list[str]]) -> str:
@@ -50,12 +52,12 @@ def _table(header: list[str], body: list[list[str]]) -> str:
     return "\n".join(lines + ["| " + " | ".join(r) + " |" for r in body]) + "\n"
 
 
-def compute(rows: list[dict], ecfg: EvalConfig) -> dict:
+def compute(rows: list[MetricRow], ecfg: EvalConfig) -> dict:
     """Every number of the report, as plain data (NaN -> None)."""
     chunk = ecfg.chunk_sizes[0]
     out: dict = {"chunk_size": chunk, "epsilon": ecfg.epsilon, "policies": {}}
-    suites = _ordered({r["suite"] for r in rows}, SUITES)
-    for pol in _ordered({r["policy"] for r in rows}, []):
+    suites = _ordered({r.suite for r in rows}, SUITES)
+    for pol in _ordered({r.policy for r in rows}, []):
         base = M.select(rows, policy=pol)
         main = M.select(base, chunk_size=chunk)
         res = {
@@ -82,22 +84,22 @@ def compute(rows: list[dict], ecfg: EvalConfig) -> dict:
 KIND_LABEL = {"scripted": "scripted expert (reference)", "recovery": "recovery expert (reference)"}
 
 
-def summary_table(rows: list[dict], data: dict) -> str:
+def summary_table(rows: list[MetricRow], data: dict) -> str:
     """RSR per policy x level, one row per policy: the experts sit beside the evaluated policies."""
     main = M.select(rows, mode="scene", chunk_size=data["chunk_size"])
     lvls = _levels(main)
     body = []
     for pol in data["policies"]:
         sel = M.select(main, policy=pol)
-        kinds = sorted({r.get("policy_kind") or "" for r in sel} - {""})
+        kinds = sorted({r.policy_kind or "" for r in sel} - {""})
         kind = ", ".join(KIND_LABEL.get(k, k) for k in kinds) or "—"
         body.append([f"`{pol}`", kind] + [_cell(sel, level=lv) for lv in lvls] + [_cell(sel)])
     return _table(["policy", "kind"] + [lv or "unlabeled" for lv in lvls] + ["all"], body)
 
 
-def markdown(rows: list[dict], ecfg: EvalConfig, data: dict, header: str = "") -> str:
+def markdown(rows: list[MetricRow], ecfg: EvalConfig, data: dict, header: str = "") -> str:
     chunk = data["chunk_size"]
-    suites = _ordered({r["suite"] for r in rows}, SUITES)
+    suites = _ordered({r.suite for r in rows}, SUITES)
     parts = ["# Recovery evaluation\n\n", header, "\n",
              f"Rates in %, trials in parentheses; — = no trials in that subset. Chunk size {chunk} unless noted; "
              f"RD epsilon {ecfg.epsilon:g}; RC uses the population std of task rates.\n",
@@ -189,12 +191,12 @@ def plots(data: dict, ecfg: EvalConfig, out: Path) -> list[str]:
     return written
 
 
-def write_report(rows: list[dict], ecfg: EvalConfig, out: str | Path, scenes_dir=None,
+def write_report(rows: list[MetricRow], ecfg: EvalConfig, out: str | Path, scenes_dir=None,
                  problems: list[str] | None = None, planned: int | None = None) -> dict:
     out = Path(out)
     data = compute(rows, ecfg)
     scene_rows = M.select(rows, mode="scene")
-    header = (f"Scenes: `{scenes_dir}` ({len({r['scene_id'] for r in scene_rows})} evaluated); "
+    header = (f"Scenes: `{scenes_dir}` ({len({r.scene_id for r in scene_rows})} evaluated); "
               f"trials recorded: {len(rows)}" + (f" of {planned} planned" if planned is not None else "") + ".\n")
     if problems:
         header += "\nProblems (skipped):\n\n" + "".join(f"- {p}\n" for p in problems)

@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Protocol, runtime_checkable
 
 from pydantic import BaseModel, ConfigDict, Field
 
-from pipeline.records import Characterization, EpisodeRecord, Localization, QuarantineEntry, SimEvent
+from pipeline.records import Characterization, EpisodeRecord, Localization, QuarantineEntry, QuarantineReason, SimEvent
 
 if TYPE_CHECKING:
     import pyarrow as pa
@@ -59,7 +59,7 @@ class Provenance(BaseModel):
         """The fields beside `source` (model, prompt name + hash, raw text)."""
         return {k: getattr(self, k) for k in TRACE}
 
-    def quarantine(self, key: str, stage: str, reason: str, detail: str, **extra) -> QuarantineEntry:
+    def quarantine(self, key: str, stage: str, reason: QuarantineReason | str, detail: str, **extra) -> QuarantineEntry:
         return QuarantineEntry(key=key, stage=stage, source=self.source, reason=reason, detail=detail,
                                **self.trace(), **extra)
 
@@ -73,7 +73,7 @@ class Onset(Provenance):
 
     latency_s: float | None = None
     fail_time_s: float | None = None
-    reason: str | None = None
+    reason: QuarantineReason | None = None
     detail: str = ""
     fail_step: int | None = None
     events: list[SimEvent] = Field(default_factory=list)

@@ -26,7 +26,7 @@ from pipeline.config import Config
 from pipeline.release.card import FIGURE, render_card, write_figure
 from pipeline.release.certify import SceneRef, certify_all
 from pipeline.release.manifest import MANIFEST_NAME, ScenarioRow, sha256_file, write_manifest
-from pipeline.records import QuarantineEntry
+from pipeline.records import QuarantineEntry, QuarantineReason
 from pipeline.release.sources import ReleaseItem, gather
 
 SUMS_NAME = "SHA256SUMS"
@@ -70,7 +70,7 @@ def _row(item: ReleaseItem, out: Path, bddl: str, state: str, history: list[str]
     return ScenarioRow(
         suite=ep.suite, task=ep.task, instruction=ep.instruction, episode_id=ep.episode_id,
         init_state=ep.init_state, step=item.step, fail_time_s=a.fail_time_s, fail_step=a.fail_step,
-        level=a.recovery_level.value, category=a.failure_category.value, recovery_action=a.recovery_action,
+        level=a.recovery_level, category=a.failure_category, recovery_action=a.recovery_action,
         policy=ep.policy,
         policy_kind=ep.policy_kind, seed=ep.seed, localize_prompt_hash=loc.prompt_hash,
         characterize_prompt_hash=char_hash, reviewers=len({r.reviewer for r in a.reviews}),
@@ -105,7 +105,7 @@ def build(cfg: Config, console: Console | None = None) -> list[ScenarioRow]:
             dim = int(np.load(item.scene_state, allow_pickle=False).shape[0])
         except (OSError, ValueError, EOFError, IndexError) as e:
             skipped.append(QuarantineEntry(key=item.annotation.key, stage="release", source="stage2",
-                                           reason="unreadable_state", detail=f"{item.scene_state}: {e}"))
+                                           reason=QuarantineReason.unreadable_state, detail=f"{item.scene_state}: {e}"))
             continue
         bddl, state, history = _place_files(item, out)
         rows.append(_row(item, out, bddl, state, history, dim))

@@ -16,9 +16,14 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+from typing import Annotated
+
 import numpy as np
 import pyarrow as pa
+from annotated_types import Len
+from pydantic import BaseModel, ConfigDict, Field
 
+from pipeline.arrow import F32, I64, arrow_schema
 from pipeline.atomic import write_text
 
 CODEBASE_VERSION = "v2.1"
@@ -54,6 +59,24 @@ def features(size: int) -> dict:
     return out
 
 
+class LeRobotFrame(BaseModel):
+    """One row of a LeRobot data file (`features` declares the same columns for readers)."""
+
+    model_config = ConfigDict(extra="forbid", populate_by_name=True)
+
+    observation_state: Annotated[list[F32], Len(8, 8)] = Field(alias="observation.state")
+    action: Annotated[list[F32], Len(7, 7)]
+    timestamp: F32
+    frame_index: I64
+    episode_index: I64
+    index: I64
+    task_index: I64
+
+
+# LeRobot's own writer leaves every column nullable and the schema without metadata
+FRAME_SCHEMA = arrow_schema(LeRobotFrame, metadata=None, nullable=True)
+
+
 def frame_table(states: np.ndarray, actions: np.ndarray, ep: int, start: int, task_index: int) -> pa.Table:
     n = len(states)
 
@@ -69,7 +92,7 @@ def frame_table(states: np.ndarray, actions: np.ndarray, ep: int, start: int, ta
         "episode_index": pa.array(np.full(n, ep), pa.int64()),
         "index": pa.array(np.arange(start, start + n), pa.int64()),
         "task_index": pa.array(np.full(n, task_index), pa.int64()),
-    })
+    }, schema=FRAME_SCHEMA)
 
 
 def _stats(x: np.ndarray) -> dict:

@@ -15,8 +15,9 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 from pydantic import BaseModel, ConfigDict
 
-from pipeline import SCHEMA_VERSION
+from pipeline.arrow import I64, SCHEMA_METADATA, arrow_schema
 from pipeline.atomic import write_with
+from pipeline.vocab import Category, Level
 
 MANIFEST_NAME = "scenarios.parquet"
 
@@ -32,12 +33,12 @@ class ScenarioRow(BaseModel):
     step: int  # simulator step of the saved scene (`step_<NNNN>`)
     fail_time_s: float
     fail_step: int
-    level: str
-    category: str
+    level: Level
+    category: Category
     recovery_action: str
     policy: str  # the failure-generator policy
     policy_kind: str
-    seed: int
+    seed: I64
     localize_prompt_hash: str | None = None
     characterize_prompt_hash: str | None = None
     reviewers: int = 0
@@ -63,40 +64,7 @@ class ScenarioRow(BaseModel):
         )
 
 
-SCENARIO_SCHEMA = pa.schema(
-    [
-        pa.field("suite", pa.string(), nullable=False),
-        pa.field("task", pa.string(), nullable=False),
-        pa.field("instruction", pa.string(), nullable=False),
-        pa.field("episode_id", pa.string(), nullable=False),
-        pa.field("init_state", pa.int32(), nullable=False),
-        pa.field("step", pa.int32(), nullable=False),
-        pa.field("fail_time_s", pa.float64(), nullable=False),
-        pa.field("fail_step", pa.int32(), nullable=False),
-        pa.field("level", pa.string(), nullable=False),
-        pa.field("category", pa.string(), nullable=False),
-        pa.field("recovery_action", pa.string(), nullable=False),
-        pa.field("policy", pa.string(), nullable=False),
-        pa.field("policy_kind", pa.string(), nullable=False),
-        pa.field("seed", pa.int64(), nullable=False),
-        pa.field("localize_prompt_hash", pa.string()),
-        pa.field("characterize_prompt_hash", pa.string()),
-        pa.field("reviewers", pa.int32(), nullable=False),
-        pa.field("adjudicated", pa.bool_(), nullable=False),
-        pa.field("state_dim", pa.int32(), nullable=False),
-        pa.field("bddl_path", pa.string(), nullable=False),
-        pa.field("bddl_sha256", pa.string(), nullable=False),
-        pa.field("state_path", pa.string(), nullable=False),
-        pa.field("state_sha256", pa.string(), nullable=False),
-        pa.field("history_paths", pa.list_(pa.string()), nullable=False),
-        pa.field("history_sha256", pa.list_(pa.string()), nullable=False),
-        pa.field("certified", pa.bool_()),
-        pa.field("certify_tries", pa.int32(), nullable=False),
-        pa.field("certify_successes", pa.int32(), nullable=False),
-        pa.field("certify_reason", pa.string()),
-    ],
-    metadata={"schema_version": str(SCHEMA_VERSION), "name": "libero-recover scenarios"},
-)
+SCENARIO_SCHEMA = arrow_schema(ScenarioRow, metadata={**SCHEMA_METADATA, "name": "libero-recover scenarios"})
 
 # columns a release built before them lacks; such a manifest still reads (they are None)
 ADDED_LATER = {"certify_reason"}

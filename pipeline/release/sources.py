@@ -21,7 +21,7 @@ from pydantic import ValidationError
 
 from pipeline.config import Stage2Config
 from pipeline.errors import EpisodeError
-from pipeline.records import Annotation, EpisodeRecord, Localization, QuarantineEntry, read_episodes
+from pipeline.records import Annotation, EpisodeRecord, Localization, QuarantineEntry, QuarantineReason, read_episodes
 from pipeline.release.resnapshot import needs_resnapshot, resnapshot
 
 
@@ -53,7 +53,7 @@ def gather(run_dir: Path, stage2_cfg: Stage2Config | None = None) -> tuple[list[
     episodes = {e.key: e for e in read_episodes(episodes_file)} if episodes_file.exists() else {}
     items, skipped = [], []
 
-    def skip(key: str, reason: str, detail: str) -> None:
+    def skip(key: str, reason: QuarantineReason, detail: str) -> None:
         skipped.append(QuarantineEntry(key=key, stage="release", source="review_export", reason=reason, detail=detail))
 
     for path in sorted(ann_root.glob("*/*/episode_*.json")):
@@ -61,21 +61,21 @@ def gather(run_dir: Path, stage2_cfg: Stage2Config | None = None) -> tuple[list[
         try:
             ann = Annotation.model_validate(json.loads(path.read_text()))
         except (OSError, json.JSONDecodeError, ValidationError) as e:
-            skip(str(rel), "schema", f"{path}: {e}")
+            skip(str(rel), QuarantineReason.schema, f"{path}: {e}")
             continue
         suite, task, ep_id = ann.suite, ann.task, ann.episode_id
         loc_path = stage2 / "localizations" / suite / task / f"{ep_id}.json"
         if not loc_path.is_file():
-            skip(ann.key, "no_localization", f"{loc_path} missing (annotation {path})")
+            skip(ann.key, QuarantineReason.no_localization, f"{loc_path} missing (annotation {path})")
             continue
         try:
             loc = Localization.model_validate_json(loc_path.read_text())
         except (OSError, ValidationError) as e:
-            skip(ann.key, "schema", f"{loc_path}: {e}")
+            skip(ann.key, QuarantineReason.schema, f"{loc_path}: {e}")
             continue
         ep = episodes.get(ann.key)
         if ep is None:
-            skip(ann.key, "no_episode", f"{episodes_file} has no episode {ann.key}")
+            skip(ann.key, QuarantineReason.no_episode, f"{episodes_file} has no episode {ann.key}")
             continue
         if stage2_cfg is not None and needs_resnapshot(ann, loc):
             try:  # reviewers moved the onset: the scene is taken again at the reviewed time
@@ -90,7 +90,7 @@ def gather(run_dir: Path, stage2_cfg: Stage2Config | None = None) -> tuple[list[
             history = stage2 / loc.history if loc.history else None
         missing = [str(p) for p in (bddl, state, history) if p is not None and not p.exists()]
         if missing:
-            skip(ann.key, "missing_scene_file", ", ".join(missing))
+            skip(ann.key, QuarantineReason.missing_scene_file, ", ".join(missing))
             continue
         items.append(ReleaseItem(ann, loc, ep, bddl, state, history, _step_of(bddl, loc.fail_step)))
     items.sort(key=lambda it: (it.episode.suite, it.episode.task, it.episode.episode_id))

@@ -22,6 +22,7 @@ from pipeline.review.db import ADJUDICATING, CONFLICT, FINAL, Adjudication, Item
 from pipeline.review.errors import Forbidden, Invalid, Stale
 from pipeline.review.fields import FieldError, snap_step, validate_field
 from pipeline.review.workflow import QueueSettings, get_item
+from pipeline.vocab import Resolution
 
 CLAIM_SECONDS = 1800
 
@@ -78,11 +79,11 @@ def adjudicate(s: Session, user: User, item_id: int, body: dict, cfg: QueueSetti
     s.add(adj)
     before = {"status": item.status, "agreed": item.agreed, "disputed": item.disputed}
     if exclude:
-        item.final, item.resolution = None, "excluded"
+        item.final, item.resolution = None, Resolution.excluded
     else:
         final = {**(item.agreed or {}), **values}
         final["fail_step"] = snap_step(final["fail_time_s"], (item.context or {}).get("control_hz", cfg.control_hz))
-        item.final, item.resolution = final, "adjudicated"
+        item.final, item.resolution = final, Resolution.adjudicated
     item.status, item.adjudicator_id, item.adjudication_lease_until = FINAL, user.id, None
     item.finalized_at, item.version = now(), item.version + 1
     s.flush()

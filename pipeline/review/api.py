@@ -23,7 +23,6 @@ from __future__ import annotations
 
 from contextlib import asynccontextmanager
 from pathlib import Path
-from typing import Literal
 
 import anyio
 from fastapi import Depends, FastAPI, Request
@@ -35,7 +34,7 @@ from starlette.concurrency import run_in_threadpool
 from sqlalchemy import select
 from sqlalchemy.engine import Engine
 
-from pipeline.records import Category, Level
+from pipeline.records import Category, Decision, Level
 from pipeline.review import adjudication, audit, auth, fastwrite, media, views, workflow
 from pipeline.review.db import COLLECTING, Item, Review, read_session, write_session
 from pipeline.review.errors import Forbidden, NotFound, ReviewError
@@ -60,7 +59,7 @@ class FieldsIn(BaseModel):
 
 class DecisionIn(BaseModel):
     model_config = ConfigDict(extra="forbid")
-    decision: Literal["accept", "revise", "flag"]
+    decision: Decision
     fields: FieldsIn | None = None
     reason: str | None = Field(default=None, max_length=2000)
     version: int = Field(default=0, ge=0)

@@ -1,7 +1,9 @@
 """Putting an episode's proposal into the review queue, and revisions.
 
 Inputs: an episode key, the model's proposal (values + model/prompt version; values may
-be missing for quarantined outputs), the review context (media paths, phases, events).
+be missing for quarantined outputs), the review context (media paths, phases, events):
+`proposal.Proposal` / `proposal.ReviewContext` or dicts of their fields, validated here;
+one that does not fit raises `proposal.InvalidProposal` naming the field and nothing is written.
 Outputs: an `items` row (status pending) and an `enqueued` or `revision` audit event.
 Invariants: enqueueing the same proposal again changes nothing (stage 3 may be rerun
 after a crash); a different proposal for a key becomes a new revision: a final item
@@ -18,6 +20,7 @@ from sqlalchemy.orm import Session
 
 from pipeline.review import audit
 from pipeline.review.db import FINAL, PENDING, SUPERSEDED, Item, Lease
+from pipeline.review.proposal import Proposal, ReviewContext, checked
 
 
 def proposal_hash(proposal: dict, quarantined: bool, reason: str | None) -> str:
@@ -30,8 +33,8 @@ def enqueue(
     *,
     key: str,
     instruction: str,
-    proposal: dict,
-    context: dict,
+    proposal: Proposal | dict,
+    context: ReviewContext | dict,
     required_reviews: int,
     quarantined: bool = False,
     reason: str | None = None,
@@ -40,6 +43,7 @@ def enqueue(
 ) -> tuple[Item, bool]:
     """Return (the item for this proposal, whether a new item was created)."""
     suite, task, ep = key.split("/", 2)
+    proposal, context = checked(Proposal, proposal, "proposal", key), checked(ReviewContext, context, "context", key)
     h = proposal_hash(proposal, quarantined, reason)
     latest = s.scalar(select(Item).where(Item.key == key).order_by(Item.revision.desc()).limit(1))
     if latest is not None and latest.proposal_hash == h:

@@ -16,38 +16,43 @@ import json
 from pathlib import Path
 
 import pyarrow as pa
+from pydantic import BaseModel, ConfigDict, Field
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from pipeline import SCHEMA_VERSION
+from pipeline.arrow import arrow_schema
 from pipeline.atomic import write_json, write_text, write_with
-from pipeline.records import Annotation, AnnotationAdjudication, AnnotationProposal, AnnotationReview
+from pipeline.records import Annotation, AnnotationAdjudication, AnnotationProposal, AnnotationReview, Category, Level
 from pipeline.review.audit import iso
 from pipeline.review.db import FINAL, Adjudication, Item, Review, User
+from pipeline.vocab import Resolution
 
-ANNOTATION_SCHEMA = pa.schema(
-    [
-        pa.field("key", pa.string(), nullable=False),
-        pa.field("suite", pa.string(), nullable=False),
-        pa.field("task", pa.string(), nullable=False),
-        pa.field("episode_id", pa.string(), nullable=False),
-        pa.field("revision", pa.int32(), nullable=False),
-        pa.field("fail_time_s", pa.float64(), nullable=False),
-        pa.field("fail_step", pa.int32(), nullable=False),
-        pa.field("recovery_level", pa.string(), nullable=False),
-        pa.field("failure_category", pa.string(), nullable=False),
-        pa.field("recovery_action", pa.string(), nullable=False),
-        pa.field("resolution", pa.string(), nullable=False),
-        pa.field("quarantined", pa.bool_(), nullable=False),
-        pa.field("model_fail_time_s", pa.float64()),
-        pa.field("model_recovery_level", pa.string()),
-        pa.field("model_failure_category", pa.string()),
-        pa.field("n_reviews", pa.int32(), nullable=False),
-        pa.field("adjudicator", pa.string()),
-        pa.field("json", pa.string(), nullable=False),  # the full record, as in the JSON file
-    ],
-    metadata={"schema_version": str(SCHEMA_VERSION)},
-)
+class AnnotationRow(BaseModel):
+    """One row of `annotations.parquet`: the headline values of an Annotation, flat."""
+
+    model_config = ConfigDict(extra="forbid", populate_by_name=True)
+
+    key: str
+    suite: str
+    task: str
+    episode_id: str
+    revision: int
+    fail_time_s: float
+    fail_step: int
+    recovery_level: Level
+    failure_category: Category
+    recovery_action: str
+    resolution: Resolution
+    quarantined: bool
+    model_fail_time_s: float | None
+    model_recovery_level: Level | None
+    model_failure_category: Category | None
+    n_reviews: int
+    adjudicator: str | None
+    json_: str = Field(alias="json")  # the full record, as in the JSON file (`json` is a BaseModel method)
+
+
+ANNOTATION_SCHEMA = arrow_schema(AnnotationRow)
 
 
 def file_for(root: Path, a: Annotation) -> Path:
@@ -80,7 +85,7 @@ def final_items(s: Session) -> list[Item]:
     newest: dict[str, Item] = {}
     for item in s.scalars(select(Item).where(Item.status == FINAL).order_by(Item.key, Item.revision)):
         newest[item.key] = item
-    return [i for i in newest.values() if i.resolution != "excluded" and i.final]
+    return [i for i in newest.values() if i.resolution != Resolution.excluded and i.final]
 
 
 def export(s: Session, root: str | Path) -> list[Path]:
@@ -95,7 +100,7 @@ def export(s: Session, root: str | Path) -> list[Path]:
     for old in root.glob("*/*/episode_*.json") if root.exists() else []:
         if old.resolve() not in keep:
             old.unlink()
-    rows = [_row(a) for a in records]
+    rows = [_row(a).model_dump(mode="json", by_alias=True) for a in records]
     table = pa.Table.from_pylist(rows, schema=ANNOTATION_SCHEMA)
     import pyarrow.parquet as pq
 
@@ -103,18 +108,17 @@ def export(s: Session, root: str | Path) -> list[Path]:
     return written
 
 
-def _row(a: Annotation) -> dict:
+def _row(a: Annotation) -> AnnotationRow:
     p = a.model_proposal
-    return {
-        "key": a.key, "suite": a.suite, "task": a.task, "episode_id": a.episode_id, "revision": a.revision,
-        "fail_time_s": a.fail_time_s, "fail_step": a.fail_step, "recovery_level": a.recovery_level.value,
-        "failure_category": a.failure_category.value, "recovery_action": a.recovery_action,
-        "resolution": a.resolution, "quarantined": a.quarantined, "model_fail_time_s": p.fail_time_s,
-        "model_recovery_level": p.recovery_level.value if p.recovery_level else None,
-        "model_failure_category": p.failure_category.value if p.failure_category else None,
-        "n_reviews": len(a.reviews), "adjudicator": a.adjudication.adjudicator if a.adjudication else None,
-        "json": json.dumps(a.model_dump(mode="json"), ensure_ascii=False),
-    }
+    return AnnotationRow(
+        key=a.key, suite=a.suite, task=a.task, episode_id=a.episode_id, revision=a.revision,
+        fail_time_s=a.fail_time_s, fail_step=a.fail_step, recovery_level=a.recovery_level,
+        failure_category=a.failure_category, recovery_action=a.recovery_action, resolution=a.resolution,
+        quarantined=a.quarantined, model_fail_time_s=p.fail_time_s, model_recovery_level=p.recovery_level,
+        model_failure_category=p.failure_category, n_reviews=len(a.reviews),
+        adjudicator=a.adjudication.adjudicator if a.adjudication else None,
+        json_=json.dumps(a.model_dump(mode="json"), ensure_ascii=False),
+    )
 
 
 def write_schema(path: str | Path) -> Path:

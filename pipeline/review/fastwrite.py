@@ -25,6 +25,7 @@ from pipeline.review.db import COLLECTING, CONFLICT, FINAL, LEASED, PENDING, REV
 from pipeline.review.db import now, read_session, write_session
 from pipeline.review.errors import Stale
 from pipeline.review.fields import agreement
+from pipeline.vocab import Decision, Resolution
 
 I, L, R, E = Item.__table__, Lease.__table__, Review.__table__, Event.__table__
 _iid, _uid, _t = bindparam("iid"), bindparam("uid"), bindparam("t")
@@ -92,7 +93,7 @@ def _close(s, item: Item, before: str, cfg: workflow.QueueSettings, actor: str) 
     if disputed:
         change["status"] = CONFLICT
     else:
-        change.update(status=FINAL, final=agreed, resolution="agreed", finalized_at=now())
+        change.update(status=FINAL, final=agreed, resolution=Resolution.agreed, finalized_at=now())
     s.execute(_CLOSE.values(**change), {"iid": item.id})
     _event(s, actor, "status", item, {"status": before},
            {"status": change["status"], "disputed": disputed, "agreed": agreed})
@@ -116,7 +117,7 @@ def decide(engine: Engine, user: User, item_id: int, body: dict, cfg: workflow.Q
             t = now()
             took = s.execute(_TAKE, {"iid": item.id, "uid": user.id, "t": t, "uname": user.name}).first()
             if took is not None:
-                reason = ((body.get("reason") or "").strip() or None) if decision == "flag" else None
+                reason = ((body.get("reason") or "").strip() or None) if decision == Decision.flag else None
                 key = str(body["idempotency_key"])
                 s.execute(_ADD_REVIEW, {"item_id": item.id, "reviewer_id": user.id, "decision": decision,
                                         "values": values, "edited": edited, "flag_reason": reason,

@@ -17,7 +17,8 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from pipeline.atomic import write_json, write_with
-from pipeline.records import EVIDENCE_SCHEMA, FRAME_SCHEMA, Localization, Phases, QuarantineEntry, SimEvent
+from pipeline.records import (EVIDENCE_SCHEMA, FRAME_SCHEMA, EventKind, Localization, Phases, QuarantineEntry,
+                              QuarantineReason, SimEvent)
 
 SUITE, TASK = "libero_spatial", "pick_up_the_black_bowl_and_place_it_on_the_plate"
 INSTRUCTION = "pick up the black bowl and place it on the plate"
@@ -108,7 +109,7 @@ def build(run_dir: str | Path, n_episodes: int = 3, n_quarantined: int = 1, step
         fail_step = steps // 2 + 2 * i
         _evidence(run_dir / "stage2" / "evidence" / SUITE / TASK / f"{ep}.parquet", steps, hz, fail_step)
         if i >= n_episodes:
-            q = QuarantineEntry(key=key, stage="stage2", source="openai", reason="no_json",
+            q = QuarantineEntry(key=key, stage="stage2", source="openai", reason=QuarantineReason.no_json,
                                 detail="the answer held no JSON object", raw_text="I think it fails around there.",
                                 model="Qwen/Qwen3.5-27B", prompt_name="localize.v1.zh", prompt_hash="ab12cd34")
             write_json(run_dir / "stage2" / "quarantine" / SUITE / TASK / f"{ep}.json", q.model_dump(mode="json"))
@@ -119,7 +120,7 @@ def build(run_dir: str | Path, n_episodes: int = 3, n_quarantined: int = 1, step
             phases=Phases(pre=(0, fail_step), during=(fail_step, min(steps, fail_step + 10)),
                           post=(min(steps, fail_step + 10), steps + 1)),
             scene_bddl=f"scenes/{SUITE}/{TASK}/{ep}.bddl", scene_state=f"scenes/{SUITE}/{TASK}/{ep}.npy",
-            events=[SimEvent(step=fail_step, time_s=fail_step / hz, kind="object_toppled", object="akita_black_bowl_1",
+            events=[SimEvent(step=fail_step, time_s=fail_step / hz, kind=EventKind.object_toppled, object="akita_black_bowl_1",
                              detail="tilted 80 degrees")],
         )
         write_json(run_dir / "stage2" / "localizations" / SUITE / TASK / f"{ep}.json", loc.model_dump(mode="json"))

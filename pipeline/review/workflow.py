@@ -40,8 +40,9 @@ from pipeline.review.db import (
 )
 from pipeline.review.errors import Invalid, NotFound, Stale
 from pipeline.review.fields import FieldError, agreement, edited_fields, resolve
+from pipeline.vocab import Decision, Resolution
 
-DECISIONS = ("accept", "revise", "flag")
+DECISIONS = tuple(d.value for d in Decision)
 
 
 @dataclass(frozen=True)
@@ -181,22 +182,22 @@ def _values_for(item: Item, decision: str, fields: dict | None, reason: str | No
     """(the decision as stored, its resolved values, the fields edited against the proposal)."""
     if decision not in DECISIONS:
         raise Invalid(f"decision: must be one of {list(DECISIONS)}, got {decision!r}", field="decision")
-    if decision == "flag":
+    if decision == Decision.flag:
         if not (reason or "").strip():
             raise Invalid("reason: a flag needs a reason", field="reason")
         return decision, None, []
-    if decision == "revise" and not fields:
+    if decision == Decision.revise and not fields:
         raise Invalid("fields: a revision must change at least one field", field="fields")
-    edits = fields if decision == "revise" else {}
+    edits = fields if decision == Decision.revise else {}
     ctx = item.context or {}
     hz = ctx.get("control_hz", cfg.control_hz)
     try:
         values = resolve(item.proposal, edits, ctx.get("duration_s"), hz)
     except FieldError as e:
         raise Invalid(str(e), field=e.field) from None
-    edited = edited_fields(item.proposal, values, hz) if decision == "revise" else []
+    edited = edited_fields(item.proposal, values, hz) if decision == Decision.revise else []
     # confirming the model's values (e.g. its time set at the playhead) is an accept, not an edit
-    return ("revise" if edited else "accept"), values, edited
+    return (Decision.revise if edited else Decision.accept), values, edited
 
 
 def _same(r: Review, decision: str, values: dict | None, reason: str | None) -> bool:
@@ -213,7 +214,7 @@ def submit_review(s: Session, user: User, item_id: int, body: dict, cfg: QueueSe
     if mine is not None and mine.idempotency_key == key:
         return mine, True
     decision, values, edited = _values_for(item, decision, body.get("fields"), body.get("reason"), cfg)
-    reason = ((body.get("reason") or "").strip() or None) if decision == "flag" else None
+    reason = ((body.get("reason") or "").strip() or None) if decision == Decision.flag else None
     if mine is not None and _same(mine, decision, values, reason):
         return mine, True
     seen = int(body.get("version") or 0)
@@ -265,7 +266,7 @@ def close(s: Session, item: Item, cfg: QueueSettings, actor: str) -> None:
     if disputed:
         item.status = CONFLICT
     else:
-        item.status, item.final, item.resolution, item.finalized_at = FINAL, agreed, "agreed", now()
+        item.status, item.final, item.resolution, item.finalized_at = FINAL, agreed, Resolution.agreed, now()
     item.version += 1
     audit.record(s, actor, "status", item, {"status": before},
                  {"status": item.status, "disputed": disputed, "agreed": agreed})

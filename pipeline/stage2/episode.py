@@ -28,7 +28,7 @@ from pipeline.atomic import write_json
 from pipeline.config import Stage2Config
 from pipeline.errors import EpisodeError
 from pipeline.evidence import compute_evidence, write_evidence
-from pipeline.records import EpisodeRecord, Localization, QuarantineEntry
+from pipeline.records import EpisodeRecord, Localization, QuarantineEntry, QuarantineReason
 from pipeline.stage2.history import build_history, render_frames, write_history
 from pipeline.stage2.layout import Stage2Paths, load_episode
 from pipeline.labelers.base import Episode, Onset, Provenance
@@ -84,27 +84,27 @@ def process_episode(env, rec: EpisodeRecord, stage1: Path, paths: Stage2Paths, c
     source = vlm.source if vlm else sim.source
     trace = (vlm or Provenance(source=source)).trace()
 
-    def quarantine(reason: str, detail: str, **extra) -> Outcome:
+    def quarantine(reason: QuarantineReason | str, detail: str, **extra) -> Outcome:
         entry = QuarantineEntry(key=rec.key, stage="stage2", source=source, reason=reason, detail=detail,
                                 events=sim.events, evidence=str(ev_rel), **trace, **extra)
         return _quarantine(paths, rec, entry)
 
     if vlm is not None and not vlm.found:
-        return quarantine(vlm.reason or "backend_error", vlm.detail)
+        return quarantine(vlm.reason or QuarantineReason.backend_error, vlm.detail)
     if vlm is not None:
         onset = step_for_time(vlm.fail_time_s, ep.frames, rec.steps, rec.control_hz)
     elif sim.fail_step is not None:
         onset = sim.fail_step
     else:
         fb = sim.fallback_step
-        return quarantine("no_failure_found",
+        return quarantine(QuarantineReason.no_failure_found,
                           f"simstate saw no failure event; the robot was idle from step {fb} "
                           f"({fb / rec.control_hz:.1f} s), a fallback onset for review",
                           fallback_step=fb, fallback_time_s=fb / rec.control_hz)
     onset = min(onset, rec.steps)
     scene_step = settled_step(ev, onset, cfg.settle_speed_mps, cfg.settle_steps)
     if scene_step is None:
-        return quarantine("not_settled", f"objects never stayed below {cfg.settle_speed_mps} m/s for "
+        return quarantine(QuarantineReason.not_settled, f"objects never stayed below {cfg.settle_speed_mps} m/s for "
                           f"{cfg.settle_steps} steps after the onset (step {onset}): no restorable scene")
     try:
         bddl, npy = write_scene(paths.root, env, rec.suite, rec.task, rec.episode_id, scene_step,

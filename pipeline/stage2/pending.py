@@ -17,7 +17,7 @@ import shutil
 from pipeline.atomic import Completions, write_json
 from pipeline.config import Config
 from pipeline.errors import FatalError
-from pipeline.records import EpisodeRecord, ManifestProblem, QuarantineEntry, read_episode_rows
+from pipeline.records import EpisodeRecord, ManifestProblem, QuarantineEntry, QuarantineReason, read_episode_rows
 from pipeline.stage2.layout import Stage2Paths, fingerprint, unit_id
 
 
@@ -57,7 +57,7 @@ def _set_aside_manifest_rows(paths: Stage2Paths, problems: list[ManifestProblem]
     for p in problems:
         if p.success is True:
             continue
-        wanted[p.key] = QuarantineEntry(key=p.key, stage="stage2", source="stage2", reason="stage1_bad_manifest",
+        wanted[p.key] = QuarantineEntry(key=p.key, stage="stage2", source="stage2", reason=QuarantineReason.stage1_bad_manifest,
                                         detail=f"{manifest} row {p.row}: field {p.field}: {p.detail}",
                                         file=manifest, field=p.field).model_dump(mode="json")
     q_root = paths.root / "quarantine"
@@ -66,7 +66,7 @@ def _set_aside_manifest_rows(paths: Stage2Paths, problems: list[ManifestProblem]
             old = json.loads(f.read_text())
         except (OSError, ValueError):
             continue
-        if old.get("reason") == "stage1_bad_manifest" and old.get("key") not in wanted:
+        if old.get("reason") == QuarantineReason.stage1_bad_manifest and old.get("key") not in wanted:
             f.unlink(missing_ok=True)
     for key, entry in wanted.items():
         target = paths.abs(paths.quarantine_for_key(key))

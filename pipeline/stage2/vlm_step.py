@@ -20,7 +20,7 @@ from pathlib import Path
 from pipeline.atomic import write_json
 from pipeline.config import Config
 from pipeline.labelers.base import Episode, Onset
-from pipeline.records import EpisodeRecord
+from pipeline.records import EpisodeRecord, QuarantineReason
 from pipeline.stage2.layout import Stage2Paths
 
 BATCH = 32
@@ -53,7 +53,7 @@ def run_vlm(cfg: Config, episodes: list[EpisodeRecord], paths: Stage2Paths,
                 try:
                     frames = pq.read_table(fp) if fp.exists() else None
                 except (pa.ArrowException, OSError) as e:  # truncated: the episode worker sets it aside
-                    bad = Onset(source=localizer.name, reason="stage1_bad_frames", detail=f"{fp}: unreadable ({e})")
+                    bad = Onset(source=localizer.name, reason=QuarantineReason.stage1_bad_frames, detail=f"{fp}: unreadable ({e})")
                     write_json(paths.abs(paths.vlm(rec)), bad.stored())
                     continue
                 batch.append(Episode(rec, folder, Path(folder / video), frames))

@@ -18,7 +18,7 @@ from pipeline.atomic import Completions, write_json
 from pipeline.config import Stage2Config
 from pipeline.errors import FatalError
 from pipeline.labelers.base import Onset
-from pipeline.records import EpisodeRecord, QuarantineEntry
+from pipeline.records import EpisodeRecord, QuarantineEntry, QuarantineReason
 
 _CACHE = None  # per worker process: the last task's environment
 
@@ -45,7 +45,7 @@ def _set_aside(paths, rec: EpisodeRecord, e: Exception):
     from pipeline.stage2.episode import Outcome
 
     paths.abs(paths.localization(rec)).unlink(missing_ok=True)
-    entry = QuarantineEntry(key=rec.key, stage="stage2", source="stage2", reason="episode_error",
+    entry = QuarantineEntry(key=rec.key, stage="stage2", source="stage2", reason=QuarantineReason.episode_error,
                             detail=f"{type(e).__name__}: {e}"[:2000])
     write_json(paths.abs(paths.quarantine(rec)), entry.model_dump(mode="json"))
     return Outcome(key=rec.key, status="quarantine", reason=entry.reason)
@@ -57,7 +57,7 @@ def _stored_onset(paths, rec: EpisodeRecord, backend: str) -> Onset | None:
         return None
     file = paths.abs(paths.vlm(rec))
     if not file.exists():
-        return Onset(source=backend, reason="backend_error", detail="no stored VLM result")
+        return Onset(source=backend, reason=QuarantineReason.backend_error, detail="no stored VLM result")
     try:
         return Onset.model_validate_json(file.read_text())
     except ValueError as e:  # ValidationError included: this episode is set aside (episode_error), naming the file

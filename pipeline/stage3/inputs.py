@@ -24,7 +24,7 @@ from pathlib import Path
 from pydantic import ValidationError
 
 from pipeline.atomic import file_stamp
-from pipeline.records import Localization, QuarantineEntry
+from pipeline.records import Localization, QuarantineEntry, QuarantineReason
 from pipeline.sim.render import CAMERAS
 
 
@@ -41,8 +41,9 @@ def warn_unreadable(path: Path, e: Exception, effect: str) -> None:
 
 
 # reasons of the units `collect` sets aside itself: a stage-2 file it cannot use as it is
-INPUT_FAULTS = ("unreadable", "key_mismatch", "duplicate_key", "fail_time_not_finite", "fail_time_negative",
-                "fail_time_beyond_episode")
+INPUT_FAULTS = (QuarantineReason.unreadable, QuarantineReason.key_mismatch, QuarantineReason.duplicate_key,
+                QuarantineReason.fail_time_not_finite, QuarantineReason.fail_time_negative,
+                QuarantineReason.fail_time_beyond_episode)
 
 
 @dataclass
@@ -111,14 +112,14 @@ def _lengths(run_dir: Path) -> dict[str, float]:
     return {r.key: r.steps / r.control_hz + (1 / r.video_fps if r.video_fps else 0.0) for r in records}
 
 
-def _time_fault(loc: Localization, length: float | None) -> tuple[str, str] | None:
+def _time_fault(loc: Localization, length: float | None) -> tuple[QuarantineReason, str] | None:
     t = loc.fail_time_s
     if not math.isfinite(t):
-        return "fail_time_not_finite", f"{t} is not a time"
+        return QuarantineReason.fail_time_not_finite, f"{t} is not a time"
     if t < 0:
-        return "fail_time_negative", f"{t} s is before the episode starts"
+        return QuarantineReason.fail_time_negative, f"{t} s is before the episode starts"
     if length is not None and t > length + 1e-6:
-        return "fail_time_beyond_episode", f"{t} s is after the episode's end ({length:g} s)"
+        return QuarantineReason.fail_time_beyond_episode, f"{t} s is after the episode's end ({length:g} s)"
     return None
 
 
@@ -134,7 +135,7 @@ def collect(run_dir: Path) -> list[Unit]:
     loc_root, q_root = s2 / "localizations", s2 / "quarantine"
     claims: dict[str, list[tuple[Path, Localization]]] = {}
 
-    def set_aside(path: Path, reason: str, detail: str, field: str | None, loc: Localization | None = None) -> None:
+    def set_aside(path: Path, reason: QuarantineReason, detail: str, field: str | None, loc: Localization | None = None) -> None:
         key = _key_from_path(loc_root, path)
         trace = {k: getattr(loc, k) for k in ("model", "prompt_name", "prompt_hash", "raw_text")} if loc else {}
         q = QuarantineEntry(key=key, stage="stage3", source=loc.source if loc else "stage2", reason=reason,
@@ -145,10 +146,10 @@ def collect(run_dir: Path) -> list[Unit]:
         try:
             loc = Localization.model_validate_json(path.read_text())
         except (ValidationError, ValueError, OSError) as e:
-            set_aside(path, "unreadable", *_problem(path, e))
+            set_aside(path, QuarantineReason.unreadable, *_problem(path, e))
             continue
         if loc.key != f"{loc.suite}/{loc.task}/{loc.episode_id}":  # every later step splits the key
-            set_aside(path, "key_mismatch", f"{path}: field key: {loc.key!r} is not "
+            set_aside(path, QuarantineReason.key_mismatch, f"{path}: field key: {loc.key!r} is not "
                       f"suite/task/episode_id ({loc.suite}/{loc.task}/{loc.episode_id})", "key", loc)
             continue
         claims.setdefault(loc.key, []).append((path, loc))
@@ -158,7 +159,7 @@ def collect(run_dir: Path) -> list[Unit]:
         for path, loc in claimants:
             if path not in owners:
                 others = ", ".join(_rel(run_dir, p) for p, _ in claimants if p != path)
-                set_aside(path, "duplicate_key", f"{path}: field key: {key} is also the key of {others}", "key", loc)
+                set_aside(path, QuarantineReason.duplicate_key, f"{path}: field key: {key} is also the key of {others}", "key", loc)
                 continue
             fault = _time_fault(loc, lengths.get(key) or _duration_of(run_dir, key))
             if fault:
@@ -171,7 +172,7 @@ def collect(run_dir: Path) -> list[Unit]:
         except (ValidationError, ValueError, OSError) as e:
             key = _key_from_path(q_root, path)
             detail, field = _problem(path, e)
-            q = QuarantineEntry(key=key, stage="stage3", source="stage2", reason="unreadable", detail=detail,
+            q = QuarantineEntry(key=key, stage="stage3", source="stage2", reason=QuarantineReason.unreadable, detail=detail,
                                 file=_rel(run_dir, path), field=field)
         if len(q.key.split("/")) != 3:
             q = q.model_copy(update={"key": _key_from_path(q_root, path)})

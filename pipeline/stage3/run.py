@@ -16,7 +16,8 @@ its stage-2 file, its evidence's size + mtime): a new characterizer or a correct
 characterizes again, and a changed proposal enters the queue as a new revision (final
 records stay untouched). A stage-2 file stage 3 cannot use (see `inputs.collect`: NaN,
 negative or too late fail_time_s, a repeated key, no parse) is set aside as a stage-3
-QuarantineEntry naming file, field and reason and queued as a quarantined item; the summary
+QuarantineEntry naming file, field and reason and queued as a quarantined item, and so is
+an episode whose proposal or review context the queue refuses (`bad_proposal`); the summary
 counts them (`set_aside`) and prints "N set aside". The exit status stays 0: set-aside
 episodes are per-episode outcomes (pipeline.errors.EpisodeError), visible in the summary.
 """
@@ -32,9 +33,10 @@ from rich.progress import Progress
 from pipeline.atomic import Completions, write_json
 from pipeline.config import Config, save_resolved
 from pipeline.errors import FatalError
-from pipeline.records import Characterization, QuarantineEntry
+from pipeline.records import Characterization, QuarantineEntry, QuarantineReason
 from pipeline.review.db import write_session
 from pipeline.review.enqueue import enqueue
+from pipeline.review.proposal import VALUE_FIELDS, InvalidProposal
 from pipeline.review.server import engine_for
 from pipeline.labelers.registry import make_characterizer
 from pipeline.stage3.inputs import INPUT_FAULTS, UNREADABLE, Unit, collect, context, fingerprint, warn_unreadable
@@ -104,7 +106,7 @@ def run(cfg: Config) -> dict:
         if characterizer is not None:
             characterizer.close()
     faults = [u.quarantine for u in units if u.quarantine and u.quarantine.stage == "stage3"
-              and u.quarantine.reason in INPUT_FAULTS]
+              and u.quarantine.reason in (*INPUT_FAULTS, QuarantineReason.bad_proposal)]
     summary = {"episodes": len(units), **counts, "set_aside": len(faults),
                "input_faults": [{"key": q.key, "reason": q.reason, "file": q.file, "field": q.field} for q in faults]}
     write_json(s3 / "summary.json", summary)
@@ -151,17 +153,38 @@ def _store(run_dir: Path, cfg: Config, engine, unit: Unit, outcome, hz: int, fps
     elif q is not None and q.stage == "stage3":
         write_json(q_file, q.model_dump(mode="json"))
         char_file.unlink(missing_ok=True)
-    with write_session(engine) as s:
-        enqueue(
-            s, key=unit.key, instruction=(unit.localization.instruction if unit.localization else
-                                          unit.instruction or _instruction(run_dir, unit)),
-            proposal=proposal_for(unit, ch, q), context=context(run_dir, unit, hz, fps),
-            required_reviews=cfg.stage3.reviews_per_item, quarantined=q is not None,
-            reason=f"{q.stage}:{q.reason}" if q else None, detail=q.detail if q else None,
-        )
+    instruction = unit.localization.instruction if unit.localization else unit.instruction or _instruction(run_dir, unit)
+    proposal, ctx = proposal_for(unit, ch, q), context(run_dir, unit, hz, fps)
+    try:
+        with write_session(engine) as s:
+            enqueue(s, key=unit.key, instruction=instruction, proposal=proposal, context=ctx,
+                    required_reviews=cfg.stage3.reviews_per_item, quarantined=q is not None,
+                    reason=f"{q.stage}:{q.reason}" if q else None, detail=q.detail if q else None)
+    except InvalidProposal as e:  # set aside: queued without the bad values, people supply them
+        q = unit.quarantine = _bad_proposal(run_dir, unit, ch, e)  # counted with the input faults
+        write_json(q_file, q.model_dump(mode="json"))
+        char_file.unlink(missing_ok=True)
+        bare = {**proposal_for(unit, None, q), **dict.fromkeys(VALUE_FIELDS)}
+        if e.field.startswith("context."):
+            ctx = {"control_hz": hz, "fps": fps}
+        with write_session(engine) as s:
+            enqueue(s, key=unit.key, instruction=instruction, proposal=bare, context=ctx,
+                    required_reviews=cfg.stage3.reviews_per_item, quarantined=True,
+                    reason=f"{q.stage}:{q.reason}", detail=q.detail)
+        return "set_aside_bad_proposal"
     if ch is not None:
         return "characterized"
     return "quarantined_stage3" if q is not None and q.stage == "stage3" else "quarantined_stage2"
+
+
+def _bad_proposal(run_dir: Path, unit: Unit, ch: Characterization | None, e: InvalidProposal) -> QuarantineEntry:
+    """The entry of an episode whose proposal or context the queue refused: the stage-2 file
+    its values came from, and the field."""
+    src = unit.source
+    file = src.relative_to(run_dir).as_posix() if src is not None and src.is_relative_to(run_dir) else src
+    return QuarantineEntry(key=unit.key, stage="stage3", source=ch.source if ch else "stage2",
+                           reason=QuarantineReason.bad_proposal, detail=f"{file}: {e.detail}",
+                           file=None if file is None else str(file), field=e.field)
 
 
 def _instruction(run_dir: Path, unit: Unit) -> str:

@@ -5,16 +5,17 @@ import math
 import pytest
 
 from pipeline.eval.metrics import counts, rc, rd, rsr, select, task_rates
+from pipeline.eval.records import MetricRow
 
 
 def row(success: bool, suite="libero_spatial", task="t0", level="L1", gripper="open", mode="scene",
-        scene="s0", rd_phase=None, policy="scripted", chunk_size=8) -> dict:
-    return {"success": success, "suite": suite, "task": task, "level": level, "gripper": gripper,
-            "mode": mode, "scene_id": scene, "rd_phase": rd_phase, "policy": policy, "chunk_size": chunk_size}
+        scene="s0", rd_phase=None, policy="scripted", chunk_size=8) -> MetricRow:
+    return MetricRow(success=success, suite=suite, task=task, level=level, gripper=gripper, mode=mode, scene_id=scene,
+                     rd_phase=rd_phase, policy=policy, chunk_size=chunk_size)
 
 
 @pytest.fixture
-def rows() -> list[dict]:
+def rows() -> list[MetricRow]:
     # task a (L1, spatial): 3/4 ; task b (L2, spatial): 1/4 ; task c (L1, goal): 0/2
     return (
         [row(True, task="a", gripper="open"), row(True, task="a", gripper="open"),
@@ -71,7 +72,7 @@ def test_rc_of_a_single_task_is_one_and_of_no_task_is_nan(rows):
     assert math.isnan(rc(rows, level="L4"))
 
 
-def _rd_rows(scene: str, pre: list[bool], post: list[bool], suite="libero_spatial") -> list[dict]:
+def _rd_rows(scene: str, pre: list[bool], post: list[bool], suite="libero_spatial") -> list[MetricRow]:
     return ([row(s, mode="rd", rd_phase="pre", scene=scene, suite=suite) for s in pre]
             + [row(s, mode="rd", rd_phase="post", scene=scene, suite=suite) for s in post])
 
@@ -110,3 +111,10 @@ def test_rd_of_an_empty_or_unmatched_subset_is_nan():
 def test_rd_rejects_a_non_positive_epsilon():
     with pytest.raises(ValueError, match="epsilon"):
         rd(_rd_rows("s1", [True], [False]), epsilon=0)
+
+
+def test_rows_are_typed_so_a_filter_on_a_column_they_lack_is_an_error(rows):
+    with pytest.raises(ValueError, match="no metric column \\['colour'\\]"):
+        select(rows, colour="red")
+    with pytest.raises(ValueError):
+        row(True, level="L9")  # not a level: refused when the row is built, not counted as its own group

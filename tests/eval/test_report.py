@@ -7,7 +7,7 @@ from pipeline.eval.report import compute, write_report
 from tests.eval.test_metrics import row
 
 
-def _rows() -> list[dict]:
+def _rows() -> list:
     rows = []
     for chunk, wins in ((8, [True, False, True, True]), (16, [False, False, True, False])):
         for i, w in enumerate(wins):
@@ -53,9 +53,9 @@ def test_compute_separates_policies():
 
 
 def test_the_summary_puts_the_recovery_expert_as_a_reference_row_beside_the_plain_expert(tmp_path):
-    rows = [row(w, policy="scripted") | {"policy_kind": "scripted"} for w in (True, False, False, False)]
-    rows += [row(w, policy="recovery", level="L3") | {"policy_kind": "recovery"} for w in (True, True, True, False)]
-    rows += [row(False, policy="pi0") | {"policy_kind": "openpi"}]
+    rows = [row(w, policy="scripted") .model_copy(update={"policy_kind": "scripted"}) for w in (True, False, False, False)]
+    rows += [row(w, policy="recovery", level="L3") .model_copy(update={"policy_kind": "recovery"}) for w in (True, True, True, False)]
+    rows += [row(False, policy="pi0") .model_copy(update={"policy_kind": "openpi"})]
     write_report(rows, EvalConfig(), tmp_path)
     md = (tmp_path / "report.md").read_text()
     assert "| policy | kind | L1 | L2 | L3 | L4 | all |" in md

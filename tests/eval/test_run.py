@@ -11,7 +11,7 @@ import yaml
 
 from pipeline.config import load_config
 from pipeline.eval import run as eval_run
-from pipeline.eval.records import read_rows
+from pipeline.eval.records import read_episodes
 from tests.eval.conftest import HoldPolicy
 
 
@@ -46,13 +46,13 @@ def hold_policies(monkeypatch):
 def test_eval_writes_records_and_report_and_a_rerun_redoes_only_missing_trials(tmp_path, fixture_run, hold_policies):
     cfg = load_config(_config(tmp_path, fixture_run))
     out = eval_run.run(cfg)
-    rows = read_rows(out / "episodes.parquet")
-    scene_rows = [r for r in rows if r["mode"] == "scene"]
-    rd_rows = [r for r in rows if r["mode"] == "rd"]
+    rows = read_episodes(out / "episodes.parquet")
+    scene_rows = [r for r in rows if r.mode == "scene"]
+    rd_rows = [r for r in rows if r.mode == "rd"]
     assert len(scene_rows) == 4  # 1 scene x 2 gripper conditions x 2 trials
-    assert sorted(r["rd_start_step"] for r in rd_rows) == [0, 20, 40, 60, 80]
-    assert {r["rd_phase"] for r in rd_rows if r["rd_start_step"] < 40} == {"pre"}
-    assert all(not r["success"] and r["steps"] == 6 for r in rows)
+    assert sorted(r.rd_start_step for r in rd_rows) == [0, 20, 40, 60, 80]
+    assert {r.rd_phase for r in rd_rows if r.rd_start_step < 40} == {"pre"}
+    assert all(not r.success and r.steps == 6 for r in rows)
     for name in ("report.md", "metrics.json", "rsr_heatmap.png", "gripper.png", "config.resolved.yaml",
                  "quarantine.jsonl"):
         assert (out / name).is_file(), name
@@ -91,7 +91,7 @@ def test_a_scene_with_a_broken_state_is_quarantined_with_its_reason(tmp_path, fi
     lines = [json.loads(x) for x in (out / "quarantine.jsonl").read_text().splitlines()]
     assert len(lines) == 2 and {x["reason"] for x in lines} == {"state_mismatch"}
     assert state.name in lines[0]["detail"]
-    assert read_rows(out / "episodes.parquet") == []
+    assert read_episodes(out / "episodes.parquet") == []
 
 
 @pytest.mark.sim
@@ -105,13 +105,13 @@ def test_recover_eval_runs_the_scripted_policy_on_two_workers(tmp_path, fixture_
                           timeout=900)
     assert proc.returncode == 0, proc.stderr[-3000:]
     out = tmp_path / "run" / "eval"
-    rows = read_rows(out / "episodes.parquet")
-    scene_rows = [r for r in rows if r["mode"] == "scene"]
-    assert {r["gripper"] for r in scene_rows} == {"open", "closed"} and len(rows) == 2 + 3  # RD: 0, 40, 80
-    assert {r["policy_kind"] for r in rows} == {"scripted"}
+    rows = read_episodes(out / "episodes.parquet")
+    scene_rows = [r for r in rows if r.mode == "scene"]
+    assert {r.gripper for r in scene_rows} == {"open", "closed"} and len(rows) == 2 + 3  # RD: 0, 40, 80
+    assert {r.policy_kind for r in rows} == {"scripted"}
     # the clean scripted expert recovers this scene from either gripper condition
-    assert all(r["success"] and r["steps"] < 200 for r in scene_rows)
-    assert all(r["init_eef_drift_m"] < 0.01 for r in rows)
+    assert all(r.success and r.steps < 200 for r in scene_rows)
+    assert all(r.init_eef_drift_m < 0.01 for r in rows)
     report = (out / "report.md").read_text()
     assert "## Policy `scripted`" in report and "100.0 (2)" in report
 

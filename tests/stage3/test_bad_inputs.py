@@ -136,3 +136,21 @@ def test_a_bug_while_reading_media_is_not_swallowed(tmp_path, monkeypatch):
     monkeypatch.setattr(pq, "read_table", broken)
     with pytest.raises(TypeError):
         context(run, unit, 20, 10.0)
+
+
+def test_a_proposal_the_queue_refuses_is_set_aside_naming_file_and_field(tmp_path):
+    run = tmp_path / "run"
+    build(run, n_episodes=2, n_quarantined=0, wrist=False)
+    _edit(run, 0, fail_step=-1)  # a time the checks pass, a step no video has
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text(yaml.safe_dump({"run": {"output_dir": str(run)}, "stage3": {"reviews_per_item": 2}}))
+    _stage3(cfg)
+    items = _items(run)
+    assert items[EP(0)].quarantined and items[EP(0)].quarantine_reason == "stage3:bad_proposal"
+    assert items[EP(0)].proposal["fail_step"] is None and items[EP(0)].proposal["localizer"]["source"] == "simstate"
+    assert not items[EP(1)].quarantined
+    q = QuarantineEntry.model_validate_json((run / "stage3" / "quarantine" / SUITE / TASK / f"{EP(0)}.json").read_text())
+    assert (q.reason, q.file, q.field) == ("bad_proposal", f"stage2/localizations/{SUITE}/{TASK}/{EP(0)}.json",
+                                           "proposal.fail_step")
+    summary = json.loads((run / "stage3" / "summary.json").read_text())
+    assert summary["set_aside"] == 1 and summary["input_faults"][0]["field"] == "proposal.fail_step"

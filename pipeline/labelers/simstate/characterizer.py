@@ -36,7 +36,7 @@ import json
 import numpy as np
 
 from pipeline.evidence import Evidence, owner_of
-from pipeline.records import Category, Characterization, Level, Localization, SimEvent
+from pipeline.records import Category, Characterization, EventKind, Level, Localization, SimEvent
 
 MOVED_M, FAR_M, OBSTRUCT_M, PLACE_NEAR_M = 0.01, 0.05, 0.15, 0.10
 TILT_DEG, TOPPLE_DEG = 10.0, 45.0
@@ -110,17 +110,17 @@ def _category(ev: Evidence, event: SimEvent | None, fixtures: list[str]) -> Cate
     if event is None:
         return Category.other
     k, obj = event.kind, event.object
-    if k in ("grasp_missed", "grasp_lost"):
+    if k in (EventKind.grasp_missed, EventKind.grasp_lost):
         return Category.grasp_failure
-    if k == "object_dropped":
+    if k == EventKind.object_dropped:
         pos = {o: ev.col("position", o)[event.step, :2] for o in ev.objects}
         near = any(np.linalg.norm(pos[obj] - pos[r]) <= PLACE_NEAR_M for r in ev.references if r in pos)
         return Category.placement_failure if near else Category.grasp_failure
-    if k in ("object_toppled", "unintended_displacement", "goal_regression"):
+    if k in (EventKind.object_toppled, EventKind.unintended_displacement, EventKind.goal_regression):
         return Category.object_displacement if (obj is None or obj in ev.targets) else Category.collision_or_interaction_failure
-    if k == "robot_contact_non_target":
+    if k == EventKind.robot_contact_non_target:
         return Category.environmental_obstruction if obj in fixtures else Category.collision_or_interaction_failure
-    if k == "object_collision":
+    if k == EventKind.object_collision:
         return Category.collision_or_interaction_failure
     return Category.other
 

@@ -34,7 +34,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pipeline.evidence import Evidence
-from pipeline.records import SimEvent
+from pipeline.records import EventKind, SimEvent
 
 
 @dataclass(frozen=True)
@@ -58,7 +58,7 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(np.flatnonzero(d == 1), np.flatnonzero(d == -1), strict=True))
 
 
-def _ev(ev: Evidence, step: int, kind: str, obj: str | None = None, other: str | None = None, detail: str = ""):
+def _ev(ev: Evidence, step: int, kind: EventKind, obj: str | None = None, other: str | None = None, detail: str = ""):
     return SimEvent(step=int(step), time_s=float(step / ev.control_hz), kind=kind, object=obj, other=other,
                     detail=detail)
 
@@ -79,7 +79,7 @@ def grasp_missed(ev: Evidence, th: Thresholds) -> list[SimEvent]:
         near = min(dist, key=dist.get)
         if dist[near] > th.near_m or held[s : min(e, s + th.grasp_window)].any():
             continue
-        out.append(_ev(ev, s, "grasp_missed", near, detail=f"closed {dist[near]:.3f} m from {near}, nothing grasped"))
+        out.append(_ev(ev, s, EventKind.grasp_missed, near, detail=f"closed {dist[near]:.3f} m from {near}, nothing grasped"))
     return out
 
 
@@ -102,10 +102,10 @@ def grasp_lost_and_dropped(ev: Evidence, th: Thresholds) -> list[SimEvent]:
             progressed = ev.goal_progress[window].max() > ev.goal_progress[e - 1]
             if fell >= th.drop_m and not supported and not progressed:
                 opens = [t for t in range(max(s, e - th.grasp_window), e) if not closed[t] and (t == 0 or closed[t - 1])]
-                out.append(_ev(ev, opens[-1] if opens else e, "object_dropped", obj,
+                out.append(_ev(ev, opens[-1] if opens else e, EventKind.object_dropped, obj,
                                detail=f"released unsupported, fell {fell:.3f} m"))
             elif closed[e - 1] and closed[e]:
-                out.append(_ev(ev, e, "grasp_lost", obj, detail="slipped out of the closed gripper"))
+                out.append(_ev(ev, e, EventKind.grasp_lost, obj, detail="slipped out of the closed gripper"))
     return out
 
 
@@ -118,7 +118,7 @@ def toppled(ev: Evidence, th: Thresholds) -> list[SimEvent]:
             k = int(over[0])
             calm = np.flatnonzero(tilt[:k] <= th.tilt_start_deg)
             step = int(calm[-1]) + 1 if len(calm) else 0
-            out.append(_ev(ev, step, "object_toppled", obj, detail=f"tilted {tilt[k]:.0f} deg"))
+            out.append(_ev(ev, step, EventKind.object_toppled, obj, detail=f"tilted {tilt[k]:.0f} deg"))
     return out
 
 
@@ -133,7 +133,7 @@ def displaced(ev: Evidence, th: Thresholds) -> list[SimEvent]:
             k = int(far[0])
             still = np.flatnonzero(disp[:k] < th.motion_m)
             step = int(still[-1]) + 1 if len(still) else 0
-            out.append(_ev(ev, step, "unintended_displacement", obj, detail=f"moved {disp[k]:.3f} m without a grasp"))
+            out.append(_ev(ev, step, EventKind.unintended_displacement, obj, detail=f"moved {disp[k]:.3f} m without a grasp"))
     return out
 
 
@@ -147,7 +147,7 @@ def robot_contacts(ev: Evidence, th: Thresholds) -> list[SimEvent]:
         for s, e in _runs(_pair_mask(ev, thing, "robot")):
             moved = float(disp[s:e].max() - disp[s])
             if e - s >= th.min_run or moved >= th.motion_m:
-                out.append(_ev(ev, s, "robot_contact_non_target", thing, "robot",
+                out.append(_ev(ev, s, EventKind.robot_contact_non_target, thing, "robot",
                                detail=f"{(e - s) / ev.control_hz:.2f} s of contact, moved it {moved:.3f} m"))
                 break
     return out
@@ -162,7 +162,7 @@ def held_collisions(ev: Evidence, th: Thresholds) -> list[SimEvent]:
             mask = _pair_mask(ev, obj, thing) & np.array([g == obj for g in ev.grasped])
             runs = [r for r in _runs(mask) if r[1] - r[0] >= th.min_run]
             if runs:
-                out.append(_ev(ev, runs[0][0], "object_collision", obj, thing, detail=f"held {obj} hit {thing}"))
+                out.append(_ev(ev, runs[0][0], EventKind.object_collision, obj, thing, detail=f"held {obj} hit {thing}"))
     return out
 
 
@@ -170,7 +170,7 @@ def goal_regression(ev: Evidence, th: Thresholds) -> list[SimEvent]:
     best = np.maximum.accumulate(ev.goal_progress)
     for s, e in _runs(ev.goal_progress < best - 1e-6):
         if e - s >= th.regress_steps:
-            return [_ev(ev, s, "goal_regression", detail=f"goal progress {best[s]:.2f} -> {ev.goal_progress[s]:.2f}")]
+            return [_ev(ev, s, EventKind.goal_regression, detail=f"goal progress {best[s]:.2f} -> {ev.goal_progress[s]:.2f}")]
     return []
 
 

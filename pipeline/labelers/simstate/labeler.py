@@ -21,7 +21,7 @@ from pipeline.labelers.base import CharacterizeOutcome, Episode, Onset, Progress
 from pipeline.labelers.simstate import characterizer as rules
 from pipeline.labelers.simstate.events import Thresholds
 from pipeline.labelers.simstate.localizer import localize
-from pipeline.records import Localization
+from pipeline.records import Localization, QuarantineReason
 
 SOURCE = "simstate"
 
@@ -42,10 +42,10 @@ class SimstateLocalizer:
 
     def _one(self, ep: Episode) -> Onset:
         if ep.evidence is None:
-            return Onset(source=SOURCE, reason="missing_evidence", detail=f"{ep.folder}: no evidence measured")
+            return Onset(source=SOURCE, reason=QuarantineReason.missing_evidence, detail=f"{ep.folder}: no evidence measured")
         res = localize(ep.evidence, self.thresholds)
         if res.onset_step is None:
-            return Onset(source=SOURCE, reason="no_failure_found", events=res.events, fallback_step=res.fallback_step)
+            return Onset(source=SOURCE, reason=QuarantineReason.no_failure_found, events=res.events, fallback_step=res.fallback_step)
         return Onset(source=SOURCE, fail_step=res.onset_step, fail_time_s=res.onset_step / ep.record.control_hz,
                      events=res.events)
 
@@ -72,7 +72,7 @@ class SimstateCharacterizer:
             if self._evidence_for is not None:
                 ev = self._evidence_for(loc)
             elif not path.is_file():
-                raise EpisodeError("missing_evidence", f"{path}: no such file")
+                raise EpisodeError(QuarantineReason.missing_evidence, f"{path}: no such file")
             else:
                 ev = self._read(path)
             return rules.characterize(loc, ev)
@@ -80,7 +80,7 @@ class SimstateCharacterizer:
             return Provenance(source=SOURCE).quarantine(loc.key, "stage3", e.reason, e.detail[:2000])
         except (ValueError, OSError, KeyError, IndexError) as e:  # a malformed evidence file
             detail = f"{path}: {type(e).__name__}: {e}"
-            return Provenance(source=SOURCE).quarantine(loc.key, "stage3", "bad_evidence", detail[:2000])
+            return Provenance(source=SOURCE).quarantine(loc.key, "stage3", QuarantineReason.bad_evidence, detail[:2000])
 
     def characterize(self, locs: Sequence[Localization], progress: Progress | None = None) -> list[CharacterizeOutcome]:
         out: list[CharacterizeOutcome] = []

@@ -27,12 +27,18 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from pipeline.evidence import Evidence
-from pipeline.records import SimEvent
 from pipeline.labelers.simstate.events import Thresholds, detect_events
+from pipeline.records import EventKind, SimEvent
 
 ONSET_PRIORITY = (
-    "grasp_missed", "grasp_lost", "object_dropped", "object_toppled", "unintended_displacement",
-    "robot_contact_non_target", "object_collision", "goal_regression",
+    EventKind.grasp_missed,
+    EventKind.grasp_lost,
+    EventKind.object_dropped,
+    EventKind.object_toppled,
+    EventKind.unintended_displacement,
+    EventKind.robot_contact_non_target,
+    EventKind.object_collision,
+    EventKind.goal_regression,
 )
 IDLE_TOL_M = 0.002
 

@@ -19,7 +19,7 @@ from pipeline.config import VLMConfig
 from pipeline.errors import FatalError
 from pipeline.labelers.base import CharacterizeOutcome, Episode, Onset, Progress, Provenance
 from pipeline.labelers.vlm.backends import VLMBackend, VLMRequest, VLMResult, make_backend
-from pipeline.records import Characterization, Localization
+from pipeline.records import Characterization, Localization, QuarantineReason
 
 
 def _duration(result: VLMResult, ep: Episode) -> float:
@@ -38,10 +38,10 @@ def onset_of(result: VLMResult, ep: Episode) -> Onset:
 
     trace = {**Provenance.of(result).model_dump(), "latency_s": result.latency_s}
     if result.error:
-        return Onset(**trace, reason="backend_error", detail=result.error)
+        return Onset(**trace, reason=QuarantineReason.backend_error, detail=result.error)
     answer = parse_localization(result, _duration(result, ep))
     if isinstance(answer, Quarantine):
-        return Onset(**trace, reason=answer.reason.value, detail=answer.detail)
+        return Onset(**trace, reason=answer.reason, detail=answer.detail)
     return Onset(**trace, fail_time_s=float(answer.fail))
 
 
@@ -67,7 +67,7 @@ class VLMLocalizer:
         asked, requests = [], []
         for i, ep in enumerate(episodes):
             if ep.video is None:
-                out[i] = Onset(source=self.name, reason="no_video", detail=f"no agentview video in {ep.folder}")
+                out[i] = Onset(source=self.name, reason=QuarantineReason.no_video, detail=f"no agentview video in {ep.folder}")
                 continue
             requests.append(VLMRequest(task="localize", video=ep.video, instruction=ep.record.instruction,
                                        frames_table=ep.frames, key=ep.record.key))
@@ -86,7 +86,7 @@ class VLMCharacterizer:
         self.name = cfg.backend
         self.run_dir = Path(run_dir)
 
-    def _quarantine(self, loc: Localization, reason: str, detail: str, prov: Provenance | None = None):
+    def _quarantine(self, loc: Localization, reason: QuarantineReason, detail: str, prov: Provenance | None = None):
         prov = prov or Provenance(source=self.name)
         return prov.quarantine(loc.key, "stage3", reason, detail[:2000])
 
@@ -103,7 +103,7 @@ class VLMCharacterizer:
             ep_dir = self.run_dir / "stage1" / "episodes" / suite / task / ep
             video = ep_dir / "video_agentview.mp4"
             if not video.is_file():
-                out[i] = self._quarantine(loc, "missing_video", f"{video}: no such file")
+                out[i] = self._quarantine(loc, QuarantineReason.missing_video, f"{video}: no such file")
                 continue
             frames = ep_dir / "frames.parquet"
             requests.append(VLMRequest(task="characterize", video=video, instruction=loc.instruction,
@@ -114,7 +114,7 @@ class VLMCharacterizer:
             loc = locs[i]
             ans = parse_characterization(res)
             if isinstance(ans, Quarantine):
-                reason = "backend_error" if res.error else ans.reason.value
+                reason = QuarantineReason.backend_error if res.error else ans.reason
                 prov = Provenance.of(res, source=self.name).model_copy(update={"raw_text": res.raw_text or ans.raw_text})
                 out[i] = self._quarantine(loc, reason, res.error or ans.detail, prov)
             else:

@@ -12,23 +12,12 @@ Values are checked by `pipeline.labelers.vlm.parse`, which normalizes lenient-bu
 
 from __future__ import annotations
 
-from enum import Enum
-
 from pydantic import BaseModel, ConfigDict, Field
 
 from pipeline.records import Category, Level
+from pipeline.vocab import QuarantineReason  # noqa: F401 - one vocabulary for every quarantine
 
 ACTION_MAX_CHARS = 200  # matches pipeline.records.Characterization.recovery_action
-
-
-class QuarantineReason(str, Enum):
-    empty = "empty"  # no answer text at all (or only whitespace / only thinking)
-    truncated = "truncated"  # cut at the token limit, or thinking never closed
-    no_json = "no_json"  # no JSON object could be found, even after repairs
-    schema = "schema"  # a JSON object, but a missing key, wrong type or bad value
-    out_of_range = "out_of_range"  # a time outside [0, video duration]
-    ambiguous = "ambiguous"  # several valid answers that disagree
-    backend_error = "backend_error"  # the request itself failed (after retries)
 
 
 class _Answer(BaseModel):

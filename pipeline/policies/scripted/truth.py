@@ -47,8 +47,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import pyarrow as pa
+from pydantic import BaseModel
 
-from pipeline import SCHEMA_VERSION
+from pipeline.arrow import F32, arrow_schema
 
 KNOCK_M = 0.02  # displacement by contact that counts as knocking an object
 FAR_KNOCK_M = 0.05  # ... for an object the goal does not involve, in an achieved attempt
@@ -60,42 +61,58 @@ DROP_M, FALL_ROWS = 0.03, 8  # fell >= DROP_M within FALL_ROWS steps of leaving 
 OUTCOMES = ("achieved", "missed_grasp", "lost_grasp", "dropped", "misplaced", "knocked", "half_open",
             "not_turned", "timeout")
 
-_CHANGE = pa.struct([
-    pa.field("object", pa.string()), pa.field("moved_m", pa.float32()), pa.field("tilt_deg", pa.float32()),
-    pa.field("tilt_gain_deg", pa.float32()), pa.field("fell_off", pa.bool_()), pa.field("held", pa.bool_()),
-    pa.field("position", pa.list_(pa.float32())),
-])
-TRUTH_SCHEMA = pa.schema(
-    [
-        pa.field("attempt", pa.int32(), nullable=False),
-        pa.field("skill", pa.string(), nullable=False),  # pick_place | open | close | turn_on | turn_off
-        pa.field("conjunct", pa.string(), nullable=False),  # e.g. "on akita_black_bowl_1 plate_1"
-        pa.field("target", pa.string(), nullable=False),  # object moved, or part operated
-        pa.field("reference", pa.string()),  # where it goes (pick_place)
-        pa.field("start_step", pa.int32(), nullable=False),
-        pa.field("end_step", pa.int32(), nullable=False),  # exclusive
-        pa.field("phases", pa.list_(pa.struct([pa.field("label", pa.string()), pa.field("step", pa.int32())]))),
-        pa.field("grasp_offset_m", pa.list_(pa.float32())),  # xy noise on the grasp point
-        pa.field("approach_height_m", pa.float32()),  # z noise on the grasp point
-        pa.field("grasp_timing_steps", pa.int32()),  # < 0 closes early, > 0 late
-        pa.field("release_timing_steps", pa.int32()),
-        pa.field("place_offset_m", pa.list_(pa.float32())),  # xy + release height noise
-        pa.field("action_noise", pa.float32(), nullable=False),  # per-step action noise scale
-        pa.field("speed_factor", pa.float32(), nullable=False),
-        pa.field("subgoal_achieved", pa.bool_(), nullable=False),
-        pa.field("outcome", pa.string(), nullable=False),  # one of OUTCOMES
-        pa.field("event", pa.string()),  # close | slip | release | knock | let_go | timeout
-        pa.field("event_step", pa.int32()),
-        pa.field("event_object", pa.string()),
-        pa.field("grip_error_m", pa.float32()),  # grip site to the target's body at the close
-        pa.field("release_dist_m", pa.float32()),  # target to reference, xy, at the release
-        pa.field("knocked", pa.list_(pa.struct([pa.field("object", pa.string()), pa.field("moved_m", pa.float32()),
-                                                pa.field("step", pa.int32())]))),
-        pa.field("changes", pa.list_(_CHANGE)),  # decisive event -> attempt end
-        pa.field("detail", pa.string(), nullable=False),
-    ],
-    metadata={"schema_version": str(SCHEMA_VERSION)},
-)
+class PhaseMark(BaseModel):
+    label: str
+    step: int
+
+
+class Knock(BaseModel):
+    object: str
+    moved_m: F32
+    step: int
+
+
+class Change(BaseModel):
+    object: str
+    moved_m: F32
+    tilt_deg: F32
+    tilt_gain_deg: F32
+    fell_off: bool
+    held: bool
+    position: list[F32]
+
+
+class TruthRow(BaseModel):
+    """One attempt of `truth.parquet` (the lists are nullable in the file, as first declared)."""
+
+    attempt: int
+    skill: str  # pick_place | open | close | turn_on | turn_off
+    conjunct: str  # e.g. "on akita_black_bowl_1 plate_1"
+    target: str  # object moved, or part operated
+    reference: str | None  # where it goes (pick_place)
+    start_step: int
+    end_step: int  # exclusive
+    phases: list[PhaseMark] | None
+    grasp_offset_m: list[F32] | None  # xy noise on the grasp point
+    approach_height_m: F32 | None  # z noise on the grasp point
+    grasp_timing_steps: int | None  # < 0 closes early, > 0 late
+    release_timing_steps: int | None
+    place_offset_m: list[F32] | None  # xy + release height noise
+    action_noise: F32  # per-step action noise scale
+    speed_factor: F32
+    subgoal_achieved: bool
+    outcome: str  # one of OUTCOMES
+    event: str | None  # close | slip | release | knock | let_go | timeout
+    event_step: int | None
+    event_object: str | None
+    grip_error_m: F32 | None  # grip site to the target's body at the close
+    release_dist_m: F32 | None  # target to reference, xy, at the release
+    knocked: list[Knock] | None
+    changes: list[Change] | None  # decisive event -> attempt end
+    detail: str
+
+
+TRUTH_SCHEMA = arrow_schema(TruthRow)
 
 
 def _tilt(q0: np.ndarray, q: np.ndarray) -> float:
