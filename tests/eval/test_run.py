@@ -124,9 +124,9 @@ def test_the_default_eval_reports_the_recovery_expert_as_a_reference_row_beside_
     path = tmp_path / "default.yaml"
     path.write_text(yaml.safe_dump(raw))
     out = eval_run.run(load_config(path))
-    rows = read_rows(out / "episodes.parquet")
-    assert sorted((r["policy"], r["policy_kind"]) for r in rows) == [("recovery", "recovery"), ("scripted", "scripted")]
-    assert all(r["success"] for r in rows if r["policy"] == "recovery")  # it recovers from a closed empty gripper
+    rows = read_episodes(out / "episodes.parquet")
+    assert sorted((r.policy, r.policy_kind) for r in rows) == [("recovery", "recovery"), ("scripted", "scripted")]
+    assert all(r.success for r in rows if r.policy == "recovery")  # it recovers from a closed empty gripper
     report = (out / "report.md").read_text()
     assert "| `scripted` | scripted expert (reference) |" in report
     assert "| `recovery` | recovery expert (reference) |" in report and "## Policy `recovery`" in report
