@@ -140,11 +140,11 @@ def _review_server(tmp: Path):
     from pipeline.review.auth import add_user
     from pipeline.review.db import make_engine, write_session
     from pipeline.review.enqueue import enqueue
-    from pipeline.review.sample_run import build
     from pipeline.review.server import ThreadedServer
     from pipeline.review.workflow import QueueSettings
     from pipeline.stage3.inputs import collect, context
     from pipeline.stage3.run import proposal_for
+    from tests.review.sample_run import build
 
     run = tmp / "run"
     build(run, n_episodes=2, n_quarantined=0)
@@ -422,7 +422,7 @@ def _(tmp):
 
     from pipeline.review.auth import add_user
     from pipeline.review.db import make_engine
-    from pipeline.review.sample_run import SUITE, TASK, build
+    from tests.review.sample_run import SUITE, TASK, build
 
     run = tmp / "run"
     build(run, n_episodes=5, n_quarantined=0, wrist=False)  # 3.0 s episodes

@@ -3,7 +3,7 @@
 over K (both must be 0). Exits 1 when any aim is missed (`missed`).
 
 Runs the real server (`recover review serve --workers 2`, its own processes, SQLite in WAL mode) on a
-synthetic run folder (`pipeline.review.sample_run`), then reviewer threads that each loop
+synthetic run folder (`tests/review/sample_run.py`), then reviewer threads that each loop
   POST /api/queue/next -> item page (GET item, frames, evidence) -> POST decision
 until the queue is empty. One reviewer first, then N at once, printed side by side. The
 reviewers are threads spread over 4 client processes (20 people use 20 browsers). The
@@ -38,11 +38,11 @@ sys.path.insert(0, str(REPO))
 from pipeline.review.auth import add_user  # noqa: E402
 from pipeline.review.db import Item, Review, User, make_engine, read_session, write_session  # noqa: E402
 from pipeline.review.enqueue import enqueue  # noqa: E402
-from pipeline.review.sample_run import build  # noqa: E402
 from pipeline.review.server import free_port  # noqa: E402
 from pipeline.stage3.inputs import collect, context  # noqa: E402
 from pipeline.stage3.run import proposal_for  # noqa: E402
 from pipeline.records import Category, Characterization, Level  # noqa: E402
+from tests.review.sample_run import build  # noqa: E402
 
 
 def fill(run: Path, engine, n_items: int, k: int, tag: str) -> None:

@@ -141,8 +141,10 @@ def bench_localize(
 
     for line in summary_lines(report):
         console.print(line)
-    folder = out or _load(config).out / "bench" / f"localize_{localizer}"
-    console.print(f"report {folder / 'report.md'}" + (f", plots {len(report['plots'])}" if report["plots"] else ""))
+    from pipeline.layout import REPORT, RunLayout
+
+    folder = out or RunLayout.of(_load(config)).bench(localizer)
+    console.print(f"report {folder / REPORT}" + (f", plots {len(report['plots'])}" if report["plots"] else ""))
 
 
 def _add_review() -> None:

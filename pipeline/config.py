@@ -26,6 +26,7 @@ from pydantic import (
 )
 
 from pipeline.errors import ConfigError
+from pipeline.layout import RESOLVED_CONFIG
 
 SUITES = ("libero_spatial", "libero_object", "libero_goal", "libero_10", "libero_90")
 
@@ -384,7 +385,7 @@ def load_config(path: str | Path, overrides: dict | None = None) -> Config:
     return cfg
 
 
-def save_resolved(cfg: Config, directory: str | Path, name: str = "config.resolved.yaml") -> Path:
+def save_resolved(cfg: Config, directory: str | Path, name: str = RESOLVED_CONFIG) -> Path:
     """Write the fully resolved config next to a stage's outputs."""
     from pipeline.atomic import write_text
 

@@ -1,24 +1,11 @@
-"""Typed records at every stage boundary, and the run folder layout.
+"""Typed records at every stage boundary.
 
 Raw data never changes; labels sit beside it, keyed by the stable episode key
-`<suite>/<task_name>/<episode_id>`. Every artifact carries `schema_version`. Closed sets of
-values are the string enums of `pipeline.vocab`; each Parquet file's schema is derived from
-its row model by `pipeline.arrow.arrow_schema` (never written by hand).
-
-Run folder (`run.output_dir`):
-    config.resolved.yaml                 the validated config of the last stage run
-    stage1/episodes.parquet              one EpisodeRecord per finished episode (manifest)
-    stage1/episodes/<suite>/<task>/<episode_id>/
-        steps.parquet                    per-step log (STEP_SCHEMA)
-        states.npy                       (steps+1, state_dim) float64 flattened MuJoCo states;
-                                         row t = state before action t; last row = final state
-        video_<camera>.mp4               rendered from states.npy
-        frames.parquet                   frame index <-> simulator step (FRAME_SCHEMA)
-        truth.parquet                    the scripted generator's own record of its attempts
-                                         (pipeline/policies/scripted/truth.py; scripted only)
-    stage1/_done/                        completion markers (written last)
-    stage2/ ... stage3/ ... release/ ... eval/   (see each stage's module docstring)
-    bench/localize_<localizer>/          `recover bench-localize` reports (pipeline/truth/bench.py)
+`<suite>/<task_name>/<episode_id>` (`pipeline.layout.episode_key`). Every artifact carries
+`schema_version`. Closed sets of values are the string enums of `pipeline.vocab`; each Parquet
+file's schema is derived from its row model by `pipeline.arrow.arrow_schema` (never written by
+hand). Where each record is stored in a run folder: `pipeline.layout.RunLayout`, documented
+file by file in docs/data-format.md.
 """
 
 from __future__ import annotations
@@ -31,6 +18,8 @@ from pydantic import BaseModel, ConfigDict, Field, model_validator
 
 from pipeline import SCHEMA_VERSION
 from pipeline.arrow import F32, I64, JSON_TEXT, arrow_schema
+from pipeline.layout import episode_key
+
 # the vocabularies live in pipeline.vocab; importing them from here keeps working
 from pipeline.vocab import Category, Decision, EventKind, Level, QuarantineReason, Resolution  # noqa: F401
 
@@ -43,10 +32,6 @@ class Record(BaseModel):
 def episode_id(policy: str, init_state: int, seed: int) -> str:
     """Stable id of an episode within its task."""
     return f"{policy}-i{init_state:02d}-s{seed}"
-
-
-def episode_key(suite: str, task: str, ep_id: str) -> str:
-    return f"{suite}/{task}/{ep_id}"
 
 
 _NAME = r"^[^/]+$"  # a key part and a folder name: not empty, no slash

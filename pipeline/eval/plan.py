@@ -21,6 +21,7 @@ from pipeline.config import Config, PolicyConfig
 from pipeline.eval.protocol import Trial
 from pipeline.eval.rd import episode_dir, rd_starts
 from pipeline.eval.scenes import Scene
+from pipeline.layout import RunLayout
 
 
 def policy_name(p: PolicyConfig) -> str:
@@ -30,12 +31,12 @@ def policy_name(p: PolicyConfig) -> str:
 def default_scenes_dir(cfg: Config) -> Path:
     if cfg.eval.scenes_dir is not None:
         return Path(cfg.eval.scenes_dir)
-    release = Path(cfg.release.output_dir) if cfg.release.output_dir else cfg.out / "release"
-    return release if (release / "scenarios.parquet").is_file() else cfg.out / "stage2"
+    layout = RunLayout.of(cfg)
+    return layout.release.root if layout.release.manifest.is_file() else layout.stage2.root
 
 
 def stage1_dir(cfg: Config) -> Path:
-    return Path(cfg.eval.stage1_dir) if cfg.eval.stage1_dir else cfg.out / "stage1"
+    return Path(cfg.eval.stage1_dir) if cfg.eval.stage1_dir else RunLayout.of(cfg).stage1.root
 
 
 def plan_trials(cfg: Config, scenes: list[Scene]) -> tuple[list[Trial], list[str]]:

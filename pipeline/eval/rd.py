@@ -18,6 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
+from pipeline.layout import EpisodeFiles, Stage1Layout, episode_key
+
 
 @dataclass(frozen=True)
 class RDStart:
@@ -44,7 +46,7 @@ def gripper_commands(actions: np.ndarray) -> list[str]:
 
 
 def episode_dir(stage1_dir: str | Path, suite: str, task: str, episode_id: str) -> Path:
-    return Path(stage1_dir) / "episodes" / suite / task / episode_id
+    return Stage1Layout(Path(stage1_dir)).episode_dir(episode_key(suite, task, episode_id))
 
 
 def rd_starts(folder: str | Path, onset: int, every: int) -> list[RDStart]:
@@ -52,7 +54,7 @@ def rd_starts(folder: str | Path, onset: int, every: int) -> list[RDStart]:
     import pyarrow.parquet as pq
 
     folder = Path(folder)
-    states_path, steps_path = folder / "states.npy", folder / "steps.parquet"
+    states_path, steps_path = EpisodeFiles(folder).states, EpisodeFiles(folder).steps
     for p in (states_path, steps_path):
         if not p.is_file():
             raise FileNotFoundError(f"{p}: missing (needed for RD reruns)")
@@ -65,4 +67,4 @@ def rd_starts(folder: str | Path, onset: int, every: int) -> list[RDStart]:
 
 
 def load_start_state(folder: str | Path, step: int) -> np.ndarray:
-    return np.array(np.load(Path(folder) / "states.npy", mmap_mode="r")[step], dtype=np.float64)
+    return np.array(np.load(EpisodeFiles(Path(folder)).states, mmap_mode="r")[step], dtype=np.float64)

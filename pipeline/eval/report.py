@@ -18,6 +18,7 @@ from pipeline.atomic import write_json, write_text, write_with
 from pipeline.config import SUITES, EvalConfig
 from pipeline.eval import metrics as M
 from pipeline.eval.records import MetricRow
+from pipeline.layout import EvalLayout
 from pipeline.vocab import Level
 
 LEVELS = tuple(Level)  # the main table's columns, always
@@ -202,6 +203,6 @@ def write_report(rows: list[MetricRow], ecfg: EvalConfig, out: str | Path, scene
         header += "\nProblems (skipped):\n\n" + "".join(f"- {p}\n" for p in problems)
     figs = plots(data, ecfg, out)
     md = markdown(rows, ecfg, data, header) + "".join(f"\n![{f}]({f})\n" for f in figs)
-    write_text(out / "report.md", md)
-    write_json(out / "metrics.json", data)
+    write_text(EvalLayout(out).report, md)
+    write_json(EvalLayout(out).metrics, data)
     return data

@@ -23,6 +23,7 @@ from pipeline.errors import EpisodeError, FatalError
 from pipeline.eval.plan import Shard, default_scenes_dir, plan_trials, shard
 from pipeline.eval.records import EvalEpisode, read_episodes, write_episodes
 from pipeline.eval.scenes import find_scenes
+from pipeline.layout import EvalLayout, RunLayout
 
 WORKER_ENV = {"MUJOCO_GL": "egl", "PYOPENGL_PLATFORM": "egl"}
 
@@ -63,13 +64,13 @@ def run_shard(item: tuple[Shard, str], emit) -> int:
             env = _ENVS.get(scene_task(trial.scene))
             ep = run_trial(env, _policy(trial.policy, trial.chunk_size, shard_), trial)
         except EpisodeError as e:
-            write_json(out / "quarantine" / f"{uid}.json", {"unit_id": uid, "scene_id": trial.scene.scene_id,
+            write_json(EvalLayout(out).quarantine(uid), {"unit_id": uid, "scene_id": trial.scene.scene_id,
                                                             "reason": e.reason, "detail": e.detail})
             emit(("error", uid, e.reason))
             continue
-        write_episodes(out / "trials" / f"{uid}.parquet", [ep])
+        write_episodes(EvalLayout(out).trial(uid), [ep])
         done.mark_done(uid, {"success": ep.success, "steps": ep.steps})
-        (out / "quarantine" / f"{uid}.json").unlink(missing_ok=True)  # an earlier failed attempt
+        EvalLayout(out).quarantine(uid).unlink(missing_ok=True)  # an earlier failed attempt
         emit(("done", uid, ep.success))
     return len(shard_.trials)
 
@@ -114,7 +115,7 @@ def release_worker_state() -> None:
 def gather(out: Path, unit_ids: list[str]) -> list[EvalEpisode]:
     rows: list[EvalEpisode] = []
     for uid in unit_ids:
-        p = out / "trials" / f"{uid}.parquet"
+        p = EvalLayout(out).trial(uid)
         if p.is_file():
             rows += read_episodes(p)
     return rows
@@ -123,7 +124,8 @@ def gather(out: Path, unit_ids: list[str]) -> list[EvalEpisode]:
 def run(cfg: Config) -> Path:
     for k, v in WORKER_ENV.items():
         os.environ.setdefault(k, v)
-    out = cfg.out / "eval"
+    layout = RunLayout.of(cfg).eval
+    out = layout.root
     out.mkdir(parents=True, exist_ok=True)
     save_resolved(cfg, out)
     scenes_dir = default_scenes_dir(cfg)
@@ -142,14 +144,14 @@ def run(cfg: Config) -> Path:
     if todo:
         _execute(cfg, shard(todo, list(cfg.eval.policies), cfg.executor.workers), out, len(todo))
     episodes = gather(out, [t.unit_id for t in trials])
-    write_episodes(out / "episodes.parquet", episodes)
+    write_episodes(layout.episodes, episodes)
     planned = {t.unit_id for t in trials}
-    quarantine = [p for p in sorted((out / "quarantine").glob("*.json")) if p.stem in planned] \
-        if (out / "quarantine").is_dir() else []
-    write_text(out / "quarantine.jsonl", "".join(json.dumps(json.loads(p.read_text())) + "\n" for p in quarantine))
+    quarantine = [p for p in sorted(layout.quarantine_dir.glob("*.json")) if p.stem in planned] \
+        if layout.quarantine_dir.is_dir() else []
+    write_text(layout.quarantine_log, "".join(json.dumps(json.loads(p.read_text())) + "\n" for p in quarantine))
     from pipeline.eval.records import read_rows
     from pipeline.eval.report import write_report
 
-    write_report(read_rows(out / "episodes.parquet"), cfg.eval, out, scenes_dir=scenes_dir, problems=problems,
+    write_report(read_rows(layout.episodes), cfg.eval, out, scenes_dir=scenes_dir, problems=problems,
                  planned=len(trials))
     return out

@@ -16,14 +16,11 @@ of a set, so it can seed per-scene randomness and key results.
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from pipeline.layout import SCENE_GLOB, STATE_SUFFIX, ReleaseLayout, episode_key, parse_key, parse_scene_bddl, scene_id
 from pipeline.sim import TaskSpec, get_task
-
-_SCENE_RE = re.compile(r"selected_bddl_scenes_(?P<suite>[^/]+)/(?P<task>[^/]+)/episode_(?P<ep>[^/]+)/step_(?P<step>\d+)\.bddl$")
-STATE_SUFFIX = "_sim_state.npy"
 
 
 @dataclass(frozen=True)
@@ -42,12 +39,12 @@ class Scene:
 
     @property
     def scene_id(self) -> str:
-        return f"{self.suite}/{self.task}/{self.episode_id}/step_{self.step:04d}"
+        return scene_id(self.source_key, self.step)
 
     @property
     def source_key(self) -> str:
         """The stage-1 episode key of the rollout this scene was cut from."""
-        return f"{self.suite}/{self.task}/{self.episode_id}"
+        return episode_key(self.suite, self.task, self.episode_id)
 
 
 def _from_manifest(root: Path, manifest: Path) -> tuple[list[Scene], list[str]]:
@@ -67,9 +64,9 @@ def _from_manifest(root: Path, manifest: Path) -> tuple[list[Scene], list[str]]:
 
 def _from_layout(root: Path) -> tuple[list[Scene], list[str]]:
     scenes, problems = [], []
-    for bddl in sorted(root.glob("selected_bddl_scenes_*/*/episode_*/step_*.bddl")):
-        m = _SCENE_RE.search(bddl.relative_to(root).as_posix())
-        if m is None:
+    for bddl in sorted(root.glob(SCENE_GLOB)):
+        parsed = parse_scene_bddl(bddl.relative_to(root).as_posix())
+        if parsed is None:
             problems.append(f"{bddl}: name does not follow step_<NNNN>.bddl")
             continue
         state = bddl.with_name(bddl.stem + STATE_SUFFIX)
@@ -77,7 +74,8 @@ def _from_layout(root: Path) -> tuple[list[Scene], list[str]]:
             problems.append(f"{bddl}: no state file {state.name} beside it")
             continue
         history = tuple(sorted(p for p in bddl.parent.glob(f"{bddl.stem}_history*") if p.is_file()))
-        scenes.append(Scene(m["suite"], m["task"], m["ep"], int(m["step"]), bddl, state, history_paths=history))
+        (suite, task, ep), step = parse_key(parsed[0]), parsed[1]
+        scenes.append(Scene(suite, task, ep, step, bddl, state, history_paths=history))
     return scenes, problems
 
 
@@ -86,7 +84,7 @@ def find_scenes(root: str | Path) -> tuple[list[Scene], list[str]]:
     root = Path(root)
     if not root.is_dir():
         raise FileNotFoundError(f"{root}: no such scene folder")
-    manifest = root / "scenarios.parquet"
+    manifest = ReleaseLayout(root).manifest
     scenes, problems = _from_manifest(root, manifest) if manifest.is_file() else _from_layout(root)
     scenes.sort(key=lambda s: (s.suite, s.task, s.episode_id, s.step))
     return scenes, problems

@@ -23,22 +23,19 @@ from rich.console import Console
 
 from pipeline.atomic import write_bytes, write_json, write_text
 from pipeline.config import Config
+from pipeline.layout import RELEASE_BUILD, RELEASE_CARD, RELEASE_SUMS, SCENE_PREFIX, STATE_SUFFIX, ReleaseLayout, RunLayout
 from pipeline.release.card import FIGURE, render_card, write_figure
 from pipeline.release.certify import SceneRef, certify_all
 from pipeline.release.manifest import MANIFEST_NAME, ScenarioRow, sha256_file, write_manifest
 from pipeline.records import QuarantineEntry, QuarantineReason
 from pipeline.release.sources import ReleaseItem, gather
 
-SUMS_NAME = "SHA256SUMS"
-BUILD_DIR = "_build"
+SUMS_NAME = RELEASE_SUMS
+BUILD_DIR = RELEASE_BUILD
 
 
 def release_dir(cfg: Config) -> Path:
-    return Path(cfg.release.output_dir) if cfg.release.output_dir else cfg.out / "release"
-
-
-def scene_dir(suite: str, task: str, ep_id: str) -> str:
-    return f"selected_bddl_scenes_{suite}/{task}/episode_{ep_id}"
+    return RunLayout.of(cfg).release.root
 
 
 def _copy(src: Path, dst: Path) -> None:
@@ -48,8 +45,8 @@ def _copy(src: Path, dst: Path) -> None:
 
 def _place_files(item: ReleaseItem, out: Path) -> tuple[str, str, list[str]]:
     """Copy the scene pair and history; return their release-relative paths."""
-    base = f"{scene_dir(item.suite, item.episode.task, item.episode.episode_id)}/step_{item.step:04d}"
-    bddl, state = f"{base}.bddl", f"{base}_sim_state.npy"
+    base = ReleaseLayout.scene_base(item.episode.key, item.step)
+    bddl, state = f"{base}.bddl", f"{base}{STATE_SUFFIX}"
     _copy(item.scene_bddl, out / bddl)
     _copy(item.scene_state, out / state)
     history: list[str] = []
@@ -83,7 +80,7 @@ def _row(item: ReleaseItem, out: Path, bddl: str, state: str, history: list[str]
 
 def _remove_stale(out: Path, keep: set[str]) -> int:
     removed = 0
-    for d in out.glob("selected_bddl_scenes_*"):
+    for d in out.glob(f"{SCENE_PREFIX}*"):
         for p in sorted(d.rglob("*"), reverse=True):
             if p.is_file() and p.relative_to(out).as_posix() not in keep:
                 p.unlink()
@@ -127,9 +124,9 @@ def build(cfg: Config, console: Console | None = None) -> list[ScenarioRow]:
         "characterization": sorted({r.characterize_prompt_hash for r in rows if r.characterize_prompt_hash}),
     }
     people = {r.reviewer for it in items for r in it.annotation.reviews}
-    write_text(out / "README.md", render_card(rows, cfg, hashes, len(people)))
+    write_text(ReleaseLayout(out).card, render_card(rows, cfg, hashes, len(people)))
 
-    released = sorted({p for r in rows for p, _ in r.files()} | {MANIFEST_NAME, FIGURE, "README.md"})
+    released = sorted({p for r in rows for p, _ in r.files()} | {MANIFEST_NAME, FIGURE, RELEASE_CARD})
     removed = _remove_stale(out, set(released))
     write_text(out / SUMS_NAME, "".join(f"{sha256_file(out / p)}  {p}\n" for p in released))
 
@@ -138,10 +135,10 @@ def build(cfg: Config, console: Console | None = None) -> list[ScenarioRow]:
         "built_at": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
         "scenes": len(rows), "skipped": len(skipped), "stale_files_removed": removed,
     })
-    write_text(out / BUILD_DIR / "quarantine.jsonl", "".join(q.model_dump_json() + "\n" for q in skipped))
+    write_text(ReleaseLayout(out).quarantine_log, "".join(q.model_dump_json() + "\n" for q in skipped))
     colour = "green" if rows else "yellow"
     console.print(f"[{colour}]released {len(rows)} scene(s)[/{colour}] to {out}"
-                  + (f"; [yellow]{len(skipped)} annotation(s) set aside[/yellow] (see {out / BUILD_DIR / 'quarantine.jsonl'})"
+                  + (f"; [yellow]{len(skipped)} annotation(s) set aside[/yellow] (see {ReleaseLayout(out).quarantine_log})"
                      if skipped else ""))
     for q in skipped:
         console.print(f"  [yellow]{q.reason}[/yellow] {q.key}: {q.detail}", highlight=False)

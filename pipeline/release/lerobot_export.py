@@ -28,6 +28,7 @@ from rich.progress import Progress
 from pipeline.atomic import Completions, write_json, write_with
 from pipeline.config import Config
 from pipeline.errors import ConfigError
+from pipeline.layout import EpisodeFiles, RunLayout, episode_key
 from pipeline.records import read_episodes
 from pipeline.release import lerobot_format as fmt
 from pipeline.release.manifest import MANIFEST_NAME
@@ -85,12 +86,12 @@ def write_video(path: Path, frames: np.ndarray) -> None:
 
 
 def rollout_episodes(cfg: Config) -> list[ExportEpisode]:
-    stage1 = cfg.out / "stage1"
+    stage1 = RunLayout.of(cfg).stage1
     out = []
-    for e in read_episodes(stage1 / "episodes.parquet"):
+    for e in read_episodes(stage1.manifest):
         if cfg.release.lerobot_episodes == "failures" and e.success:
             continue
-        out.append(ExportEpisode(e.key, e.suite, e.task, e.instruction, stage1 / e.path, e.steps))
+        out.append(ExportEpisode(e.key, e.suite, e.task, e.instruction, stage1.episode(e).dir, e.steps))
     return sorted(out, key=lambda x: x.key)
 
 
@@ -99,13 +100,13 @@ def history_episodes(cfg: Config, manifest: Path) -> list[ExportEpisode]:
 
     if not manifest.is_file():
         return []
-    stage1 = cfg.out / "stage1"
-    eps = {e.key: e for e in read_episodes(stage1 / "episodes.parquet")}
+    stage1 = RunLayout.of(cfg).stage1
+    eps = {e.key: e for e in read_episodes(stage1.manifest)}
     out = []
     for r in read_manifest(manifest):
-        e = eps.get(f"{r.suite}/{r.task}/{r.episode_id}")
+        e = eps.get(episode_key(r.suite, r.task, r.episode_id))
         if e is not None and r.fail_step >= 1:
-            out.append(ExportEpisode(f"{e.key}@{r.step}", r.suite, r.task, r.instruction, stage1 / e.path,
+            out.append(ExportEpisode(f"{e.key}@{r.step}", r.suite, r.task, r.instruction, stage1.episode(e).dir,
                                      min(r.fail_step, e.steps)))
     return sorted(out, key=lambda x: x.key)
 
@@ -131,8 +132,9 @@ def recovery_episodes(cfg: Config, release: Path) -> list[ExportEpisode]:
 def export_episode(env: SimEnv, ep: ExportEpisode, i: int, start: int, task_index: int, root: Path,
                    size: int) -> dict:
     """Render and write episode `i`; return its episodes.jsonl/episodes_stats.jsonl entry."""
-    states = np.load(ep.folder / "states.npy")[: ep.length]
-    actions = np.array(pq.read_table(ep.folder / "steps.parquet").column("action").to_pylist())[: ep.length]
+    files = EpisodeFiles(ep.folder)
+    states = np.load(files.states)[: ep.length]
+    actions = np.array(pq.read_table(files.steps).column("action").to_pylist())[: ep.length]
     robot, frames = render_episode(env, states, size)
     table = fmt.frame_table(robot, actions, i, start, task_index)
     write_with(root / fmt.data_path(i), lambda p: pq.write_table(table, p))
@@ -168,9 +170,8 @@ DATASETS = ("rollouts", "pre_failure_histories", "recoveries")
 
 def run(cfg: Config, out: Path | None = None, only: list[str] | None = None) -> Path:
     """Export every dataset, or those named in `only`."""
-    from pipeline.release.build import release_dir
-
-    out = Path(out or cfg.release.lerobot_dir or cfg.out / "lerobot")
+    layout = RunLayout.of(cfg)
+    out = Path(out or cfg.release.lerobot_dir or layout.lerobot)
     size = cfg.release.lerobot_image_size
     if size % 2:
         raise ConfigError(f"release.lerobot_image_size must be even for yuv420p video, got {size}")
@@ -178,8 +179,8 @@ def run(cfg: Config, out: Path | None = None, only: list[str] | None = None) -> 
     if bad:
         raise ConfigError(f"export-lerobot: unknown dataset(s) {bad}; choose from {list(DATASETS)}")
     sources = {"rollouts": lambda: rollout_episodes(cfg),
-               "pre_failure_histories": lambda: history_episodes(cfg, release_dir(cfg) / MANIFEST_NAME),
-               "recoveries": lambda: recovery_episodes(cfg, release_dir(cfg))}
+               "pre_failure_histories": lambda: history_episodes(cfg, layout.release.manifest),
+               "recoveries": lambda: recovery_episodes(cfg, layout.release.root)}
     datasets = {name: sources[name]() for name in DATASETS if not only or name in only}
     console = Console()
     with Progress(console=console, transient=True) as progress, EnvCache(capacity=1) as envs:

@@ -17,9 +17,10 @@ from pydantic import BaseModel, ConfigDict
 
 from pipeline.arrow import I64, SCHEMA_METADATA, arrow_schema
 from pipeline.atomic import write_with
+from pipeline.layout import RELEASE_MANIFEST
 from pipeline.vocab import Category, Level
 
-MANIFEST_NAME = "scenarios.parquet"
+MANIFEST_NAME = RELEASE_MANIFEST
 
 
 class ScenarioRow(BaseModel):

@@ -20,6 +20,7 @@ from rich.table import Table
 
 from pipeline.config import Config
 from pipeline.errors import FatalError
+from pipeline.layout import RunLayout
 from pipeline.release.build import SUMS_NAME, build, release_dir
 from pipeline.release.manifest import MANIFEST_NAME, read_manifest
 
@@ -61,7 +62,7 @@ def fresh_config(cfg: Config) -> Config:
 def rebuild(cfg: Config) -> Config:
     """Re-run stages 1-2 into the fresh folder, copy the stored annotations, release there."""
     new = fresh_config(cfg)
-    annotations = cfg.out / "stage3" / "annotations"
+    annotations = RunLayout.of(cfg).stage3.annotations
     if not annotations.is_dir():
         raise FatalError(f"{annotations}: no final reviewed annotations to reproduce from")
     if new.out.exists():
@@ -69,7 +70,7 @@ def rebuild(cfg: Config) -> Config:
     for stage in ("pipeline.stage1.run:run", "pipeline.stage2.run:run"):
         module, func = stage.split(":")
         getattr(importlib.import_module(module), func)(new)
-    shutil.copytree(annotations, new.out / "stage3" / "annotations")
+    shutil.copytree(annotations, RunLayout.of(new).stage3.annotations)
     build(new)
     return new
 

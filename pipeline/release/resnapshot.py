@@ -20,13 +20,11 @@ from pipeline.atomic import write_text, write_with
 from pipeline.config import Stage2Config
 from pipeline.errors import EpisodeError
 from pipeline.evidence import read_evidence
+from pipeline.layout import RunLayout, scene_files
 from pipeline.records import Annotation, EpisodeRecord, Localization
 from pipeline.stage2.history import build_history, write_history
-from pipeline.stage2.layout import Stage2Paths, load_episode
+from pipeline.stage2.layout import load_episode
 from pipeline.stage2.phases import settled_step
-from pipeline.stage2.scenes import scene_dir, scene_stem
-
-REVIEWED_SCENES = Path("stage3") / "reviewed_scenes"
 
 
 def needs_resnapshot(ann: Annotation, loc: Localization) -> bool:
@@ -37,9 +35,10 @@ def resnapshot(run_dir: Path, ann: Annotation, loc: Localization, ep: EpisodeRec
                cfg: Stage2Config) -> tuple[Path, Path, Path | None]:
     """Write the scene pair (+ history) for the reviewed onset; return their paths.
     Raises EpisodeError (reason, detail naming the file) when the inputs cannot give one."""
-    stage1, stage2 = run_dir / "stage1", run_dir / "stage2"
-    episode = load_episode(stage1, ep)
-    evidence_path = Stage2Paths(stage2).abs(Stage2Paths(stage2).evidence(ep))
+    layout = RunLayout(run_dir)
+    stage2 = layout.stage2.root
+    episode = load_episode(layout.stage1.root, ep)
+    evidence_path = layout.stage2.abs(layout.stage2.evidence(ep))
     try:
         evidence = read_evidence(evidence_path)
     except (OSError, ValueError) as e:
@@ -48,15 +47,14 @@ def resnapshot(run_dir: Path, ann: Annotation, loc: Localization, ep: EpisodeRec
     step = settled_step(evidence, onset, cfg.settle_speed_mps, cfg.settle_steps)
     if step is None:
         raise EpisodeError("not_settled", f"no settled state after the reviewed onset step {onset} of {ep.key}")
-    folder = scene_dir(run_dir / REVIEWED_SCENES, ep.suite, ep.task, ep.episode_id)
-    stem = scene_stem(step)
-    bddl, state = folder / f"{stem}.bddl", folder / f"{stem}_sim_state.npy"
+    scene = scene_files(layout.stage3.reviewed_scenes, ep.key, step)
+    bddl, state = scene.bddl, scene.state
     # the model's scene BDDL is already normalized; the task's text does not depend on the step
     write_text(bddl, (stage2 / loc.scene_bddl).read_text())
     write_with(state, lambda p: np.save(p, np.asarray(episode.states[step], dtype=np.float64)))
     history = None
     if cfg.history_frames > 0:
-        history = folder / f"{stem}_history.npz"
+        history = scene.history
         write_history(history, build_history(episode.states, episode.steps, onset, cfg.history_frames,
                                              cfg.history_stride_steps, ep.control_hz))
     return bddl, state, history

@@ -21,6 +21,7 @@ from pydantic import ValidationError
 
 from pipeline.config import Stage2Config
 from pipeline.errors import EpisodeError
+from pipeline.layout import RunLayout, Stage3Layout, episode_key
 from pipeline.records import Annotation, EpisodeRecord, Localization, QuarantineEntry, QuarantineReason, read_episodes
 from pipeline.release.resnapshot import needs_resnapshot, resnapshot
 
@@ -47,24 +48,24 @@ def _step_of(bddl: Path, fallback: int) -> int:
 
 def gather(run_dir: Path, stage2_cfg: Stage2Config | None = None) -> tuple[list[ReleaseItem], list[QuarantineEntry]]:
     """`stage2_cfg` (settle rules, history window) enables re-snapshots at reviewed onsets."""
-    stage1, stage2 = run_dir / "stage1", run_dir / "stage2"
-    ann_root = run_dir / "stage3" / "annotations"
-    episodes_file = stage1 / "episodes.parquet"
+    layout = RunLayout(run_dir)
+    stage2 = layout.stage2.root
+    ann_root = layout.stage3.annotations
+    episodes_file = layout.stage1.manifest
     episodes = {e.key: e for e in read_episodes(episodes_file)} if episodes_file.exists() else {}
     items, skipped = [], []
 
     def skip(key: str, reason: QuarantineReason, detail: str) -> None:
         skipped.append(QuarantineEntry(key=key, stage="release", source="review_export", reason=reason, detail=detail))
 
-    for path in sorted(ann_root.glob("*/*/episode_*.json")):
+    for path in sorted(ann_root.glob(Stage3Layout.ANNOTATION_GLOB)):
         rel = path.relative_to(run_dir)
         try:
             ann = Annotation.model_validate(json.loads(path.read_text()))
         except (OSError, json.JSONDecodeError, ValidationError) as e:
             skip(str(rel), QuarantineReason.schema, f"{path}: {e}")
             continue
-        suite, task, ep_id = ann.suite, ann.task, ann.episode_id
-        loc_path = stage2 / "localizations" / suite / task / f"{ep_id}.json"
+        loc_path = layout.stage2.localization_of_key(episode_key(ann.suite, ann.task, ann.episode_id))
         if not loc_path.is_file():
             skip(ann.key, QuarantineReason.no_localization, f"{loc_path} missing (annotation {path})")
             continue

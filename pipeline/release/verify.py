@@ -22,6 +22,7 @@ from rich.progress import track
 from rich.table import Table
 
 from pipeline.config import ReleaseConfig
+from pipeline.layout import RELEASE_BUILD, RELEASE_CARD, RELEASE_SUMS, SCENE_PREFIX
 from pipeline.release.manifest import MANIFEST_NAME, read_manifest, sha256_file
 from pipeline.release.scene_files import check_bddl, load_state
 from pipeline.release.scene_physics import check_goal_unsatisfied, check_restores, check_settled, scene_task
@@ -30,9 +31,9 @@ from pipeline.sim import SimEnv
 CHECKS = ("files", "checksum", "bddl", "state", "restore", "goal", "settled")
 # what `recover release` writes at the top of a release folder (build.py); anything else is
 # stray, e.g. a file dropped in by hand that SHA256SUMS and the manifest would not cover
-TOP_LEVEL_FILES = {MANIFEST_NAME, "README.md", "SHA256SUMS"}
-TOP_LEVEL_DIRS = {"_build", "figures"}
-SCENE_DIR_PREFIX = "selected_bddl_scenes_"
+TOP_LEVEL_FILES = {MANIFEST_NAME, RELEASE_CARD, RELEASE_SUMS}
+TOP_LEVEL_DIRS = {RELEASE_BUILD, "figures"}
+SCENE_DIR_PREFIX = SCENE_PREFIX
 
 
 @dataclass

@@ -12,6 +12,8 @@ from pathlib import Path
 
 import typer
 
+from pipeline.layout import RunLayout
+
 app = typer.Typer(add_completion=False, no_args_is_help=True, help="Human review queue.")
 CONFIG = typer.Option(Path("configs/smoke.yaml"), "--config", "-c", help="run config (YAML)")
 
@@ -123,16 +125,16 @@ def status(config: Path = CONFIG, as_json: bool = typer.Option(False, "--json", 
         expire(s)
     with read_session(engine) as s:
         out = {"counts": views.counts(s), **report.summary(s, settings(cfg).time_tolerance_s)}
-    folder = Path(cfg.out) / "stage3"
-    write_json(folder / "review_status.json", out)
-    png = report.plot(out, folder / "review_confusion.png")
+    s3 = RunLayout.of(cfg).stage3
+    write_json(s3.review_status, out)
+    png = report.plot(out, s3.review_confusion)
     if as_json:
         typer.echo(json.dumps(out, indent=2))
     else:
         from pipeline.review.status_view import render
 
         render(out)
-    typer.echo(f"wrote {folder / 'review_status.json'} and {png}")
+    typer.echo(f"wrote {s3.review_status} and {png}")
 
 
 @app.command()
@@ -143,7 +145,7 @@ def export(config: Path = CONFIG, out: Path = typer.Option(None, help="default: 
     from pipeline.review.server import engine_for
 
     cfg = _cfg(config)
-    root = out or Path(cfg.out) / "stage3" / "annotations"
+    root = out or RunLayout.of(cfg).stage3.annotations
     with read_session(engine_for(cfg)) as s:
         files = do_export(s, root)
     typer.echo(f"exported {len(files)} final record(s) to {root}")

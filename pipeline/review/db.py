@@ -38,6 +38,8 @@ from sqlalchemy import (
 from sqlalchemy.engine import Engine
 from sqlalchemy.orm import DeclarativeBase, Mapped, Session, mapped_column
 
+from pipeline.layout import RunLayout
+
 # item states; "agreed" is passed through on the way to final (recorded as resolution)
 PENDING, LEASED, REVIEWED, CONFLICT, ADJUDICATING, FINAL, SUPERSEDED = (
     "pending", "leased", "reviewed", "conflict", "adjudicating", "final", "superseded",
@@ -165,7 +167,7 @@ _APPEND_ONLY = [
 
 
 def default_url(run_dir: str | Path) -> str:
-    return f"sqlite:///{Path(run_dir).resolve() / 'stage3' / 'review.sqlite'}"
+    return f"sqlite:///{RunLayout(Path(run_dir).resolve()).stage3.review_db}"
 
 
 def make_engine(url: str, busy_timeout_ms: int = 10_000) -> Engine:

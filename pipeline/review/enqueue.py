@@ -18,6 +18,7 @@ import json
 from sqlalchemy import delete, select
 from sqlalchemy.orm import Session
 
+from pipeline.layout import parse_key
 from pipeline.review import audit
 from pipeline.review.db import FINAL, PENDING, SUPERSEDED, Item, Lease
 from pipeline.review.proposal import Proposal, ReviewContext, checked
@@ -42,7 +43,7 @@ def enqueue(
     actor: str = "stage3",
 ) -> tuple[Item, bool]:
     """Return (the item for this proposal, whether a new item was created)."""
-    suite, task, ep = key.split("/", 2)
+    suite, task, ep = parse_key(key)
     proposal, context = checked(Proposal, proposal, "proposal", key), checked(ReviewContext, context, "context", key)
     h = proposal_hash(proposal, quarantined, reason)
     latest = s.scalar(select(Item).where(Item.key == key).order_by(Item.revision.desc()).limit(1))

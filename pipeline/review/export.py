@@ -22,6 +22,7 @@ from sqlalchemy.orm import Session
 
 from pipeline.arrow import arrow_schema
 from pipeline.atomic import write_json, write_text, write_with
+from pipeline.layout import Stage3Layout
 from pipeline.records import Annotation, AnnotationAdjudication, AnnotationProposal, AnnotationReview, Category, Level
 from pipeline.review.audit import iso
 from pipeline.review.db import FINAL, Adjudication, Item, Review, User
@@ -56,7 +57,7 @@ ANNOTATION_SCHEMA = arrow_schema(AnnotationRow)
 
 
 def file_for(root: Path, a: Annotation) -> Path:
-    return root / a.suite / a.task / f"episode_{a.episode_id}.json"
+    return Stage3Layout.annotation(root, a.suite, a.task, a.episode_id)
 
 
 def annotation(s: Session, item: Item) -> Annotation:
@@ -97,14 +98,14 @@ def export(s: Session, root: str | Path) -> list[Path]:
         write_json(path, a.model_dump(mode="json"))
         written.append(path)
     keep = {p.resolve() for p in written}
-    for old in root.glob("*/*/episode_*.json") if root.exists() else []:
+    for old in root.glob(Stage3Layout.ANNOTATION_GLOB) if root.exists() else []:
         if old.resolve() not in keep:
             old.unlink()
     rows = [_row(a).model_dump(mode="json", by_alias=True) for a in records]
     table = pa.Table.from_pylist(rows, schema=ANNOTATION_SCHEMA)
     import pyarrow.parquet as pq
 
-    write_with(root / "annotations.parquet", lambda p: pq.write_table(table, p))
+    write_with(root / Stage3Layout.ANNOTATIONS_TABLE, lambda p: pq.write_table(table, p))
     return written
 
 

@@ -14,10 +14,16 @@ import os
 from functools import lru_cache
 from pathlib import Path
 
+from pipeline.layout import RunLayout
+
 ALLOWED_SUFFIXES = {".mp4", ".webm", ".parquet", ".png", ".jpg", ".json"}
-# only the raw episode data and its simulator evidence: stage 3 holds the exported labels
-# (every reviewer's values), which a reviewer must never see
-ALLOWED_FOLDERS = ("stage1", "stage2")
+
+
+def _allowed(root: Path) -> tuple[Path, Path]:
+    """Only the raw episode data and its simulator evidence: stage 3 holds the exported labels
+    (every reviewer's values), which a reviewer must never see."""
+    layout = RunLayout(root)
+    return layout.stage1.root, layout.stage2.root
 
 
 def safe_path(run_dir: Path, rel: str) -> Path | None:
@@ -28,7 +34,7 @@ def safe_path(run_dir: Path, rel: str) -> Path | None:
         target = (root / rel).resolve(strict=True)
     except (OSError, RuntimeError):
         return None
-    if not any(target.is_relative_to(root / folder) for folder in ALLOWED_FOLDERS):
+    if not any(target.is_relative_to(folder) for folder in _allowed(root)):
         return None
     if not target.is_file() or target.suffix.lower() not in ALLOWED_SUFFIXES:
         return None

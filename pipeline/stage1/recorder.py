@@ -20,6 +20,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from pipeline.atomic import write_with
+from pipeline.layout import EpisodeFiles
 from pipeline.records import STEP_SCHEMA
 from pipeline.rollout import StepInfo
 from pipeline.sim import SimEnv
@@ -81,8 +82,8 @@ class EpisodeRecorder:
         )
 
     def write(self, folder: str | Path) -> None:
-        folder = Path(folder)
+        files = EpisodeFiles(Path(folder))
         states = self.states_array()
-        write_with(folder / "states.npy", lambda p: np.save(p, states))
+        write_with(files.states, lambda p: np.save(p, states))
         table = self.table()
-        write_with(folder / "steps.parquet", lambda p: pq.write_table(table, p))
+        write_with(files.steps, lambda p: pq.write_table(table, p))

@@ -27,6 +27,7 @@ from pipeline.atomic import Completions, write_text
 from pipeline.config import Config, save_resolved
 from pipeline.errors import ConfigError
 from pipeline.executors import Executor, SetAside, make_executor
+from pipeline.layout import RESOLVED_CONFIG, RunLayout
 from pipeline.stage1.summary import collect_records, summarize, summary_table, write_manifest, write_summary
 from pipeline.stage1.units import Shard, make_shards, plan_units
 from pipeline.stage1.worker import run_shard
@@ -45,7 +46,7 @@ def _experiment(cfg: Config) -> dict:
 
 
 def _check_resumable(cfg: Config, stage1: Path) -> None:
-    saved = stage1 / "config.resolved.yaml"
+    saved = stage1 / RESOLVED_CONFIG
     if not saved.exists() or not Completions(stage1).done_ids():
         return
     old = Config.model_validate(yaml.safe_load(saved.read_text()))
@@ -68,7 +69,8 @@ def run(
     console: Console | None = None,
 ) -> dict:
     console = console or Console()
-    stage1 = cfg.out / "stage1"
+    s1 = RunLayout.of(cfg).stage1
+    stage1 = s1.root
     _check_resumable(cfg, stage1)
     save_resolved(cfg, cfg.out)
     save_resolved(cfg, stage1)
@@ -115,7 +117,7 @@ def run(
         if isinstance(res, SetAside):
             for u in shard.units:
                 if not done.is_done(u.unit_id):
-                    write_text(stage1 / "errors" / f"{u.unit_id}.txt", f"worker died: {res.reason}\n")
+                    write_text(s1.error(u.unit_id), f"worker died: {res.reason}\n")
                     stats["errors"].append({"kind": "error", "unit": u.unit_id, "reason": "WorkerDied",
                                             "detail": res.reason})
 
@@ -130,7 +132,7 @@ def run(
     missing = len(units) - len(records)
     msg = f"manifest {manifest} ({len(records)}/{len(units)} episodes)"
     if missing:
-        msg += f"; [red]{missing} episode(s) not done[/red] (errors in {stage1 / 'errors'}); rerun the same command to retry"
+        msg += f"; [red]{missing} episode(s) not done[/red] (errors in {s1.errors_dir}); rerun the same command to retry"
     console.print(msg)
     return {"planned": len(units), "done": len(records), "ran": stats["ran"], "errors": stats["errors"],
             "manifest": str(manifest), "wall_s": elapsed}

@@ -18,6 +18,7 @@ from rich.table import Table
 
 from pipeline.atomic import Completions, write_json, write_with
 from pipeline.errors import InputError, invalid_file
+from pipeline.layout import Stage1Layout
 from pipeline.records import EpisodeRecord, episodes_table
 
 
@@ -42,7 +43,7 @@ def collect_records(stage1_dir: Path, unit_ids: list[str] | None = None) -> list
 
 
 def write_manifest(stage1_dir: Path, records: list[EpisodeRecord]) -> Path:
-    path = Path(stage1_dir) / "episodes.parquet"
+    path = Stage1Layout(Path(stage1_dir)).manifest
     table = episodes_table(records)
     write_with(path, lambda p: pq.write_table(table, p))
     return path
@@ -85,4 +86,4 @@ def summary_table(rows: list[dict]) -> Table:
 
 
 def write_summary(stage1_dir: Path, rows: list[dict], extra: dict) -> None:
-    write_json(Path(stage1_dir) / "summary.json", {"tasks": rows, **extra})
+    write_json(Stage1Layout(Path(stage1_dir)).summary, {"tasks": rows, **extra})

@@ -18,7 +18,8 @@ import math
 from dataclasses import dataclass
 
 from pipeline.config import Config
-from pipeline.records import episode_id, episode_key
+from pipeline.layout import Stage1Layout, episode_key, unit_id
+from pipeline.records import episode_id
 
 
 def episode_seed(run_seed: int, suite: str, task: str, init_state: int) -> int:
@@ -46,12 +47,12 @@ class EpisodeUnit:
 
     @property
     def unit_id(self) -> str:
-        return f"{self.suite}__{self.task}__{self.episode_id}"
+        return unit_id(self.key)
 
     @property
     def rel_dir(self) -> str:
         """Episode folder relative to the run's stage1/ folder."""
-        return f"episodes/{self.key}"
+        return Stage1Layout.episode_rel(self.key)
 
 
 @dataclass(frozen=True)

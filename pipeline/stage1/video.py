@@ -21,6 +21,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from pipeline.atomic import atomic_path, write_with
+from pipeline.layout import EpisodeFiles, video_name
 from pipeline.records import FRAME_SCHEMA
 from pipeline.sim import CONTROL_HZ, SimEnv
 
@@ -76,7 +77,7 @@ def write_videos(
     for camera, images in frames.items():
         if len(images) != len(steps):
             raise ValueError(f"{camera}: {len(images)} frames for {len(steps)} steps")
-        name = f"video_{camera}.mp4"
+        name = video_name(camera)
         with atomic_path(folder / name) as tmp:
             w = Mp4Writer(tmp, fps, images[0].shape[0])
             for img in images:
@@ -84,7 +85,7 @@ def write_videos(
             w.close()
         videos[camera] = name
     table = frame_table(steps)
-    write_with(folder / "frames.parquet", lambda p: pq.write_table(table, p))
+    write_with(EpisodeFiles(folder).frames, lambda p: pq.write_table(table, p))
     return videos
 
 

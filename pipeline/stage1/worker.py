@@ -31,6 +31,7 @@ import pyarrow.parquet as pq
 from pipeline.atomic import Completions, write_text, write_with
 from pipeline.config import Config, PolicyConfig
 from pipeline.errors import FatalError
+from pipeline.layout import EpisodeFiles, Stage1Layout
 from pipeline.policies.base import Policy
 from pipeline.records import EpisodeRecord
 from pipeline.rollout import run_episode
@@ -89,7 +90,7 @@ def run_physics(env: SimEnv, policy: Policy, unit: EpisodeUnit, cfg: Config,
     """Run and record one episode; write its states and step log. Returns its record
     (without videos) and, if it needs videos, its states (render them, then fill `videos`)."""
     r, v = cfg.stage1.rollout, cfg.stage1.video
-    folder = stage1_dir / unit.rel_dir
+    folder = Stage1Layout(stage1_dir).episode_dir(unit.key)
     if folder.exists():  # leftovers of an attempt killed before its marker
         shutil.rmtree(folder)
     t0 = time.perf_counter()
@@ -109,7 +110,7 @@ def run_physics(env: SimEnv, policy: Policy, unit: EpisodeUnit, cfg: Config,
     rec.write(folder)
     truth = policy.truth_table() if hasattr(policy, "truth_table") else None
     if truth is not None:
-        write_with(folder / "truth.parquet", lambda p: pq.write_table(truth, p))
+        write_with(EpisodeFiles(Path(folder)).truth, lambda p: pq.write_table(truth, p))
     record = EpisodeRecord(
         suite=unit.suite,
         task=unit.task,
@@ -146,7 +147,8 @@ def run_one(env: SimEnv, policy: Policy, unit: EpisodeUnit, cfg: Config, stage1_
     record, states = run_physics(env, policy, unit, cfg, stage1_dir)
     if states is None:
         return record
-    videos = render_videos(env, states, stage1_dir / unit.rel_dir, list(v.cameras), v.fps, v.resolution, v.quality)
+    folder = Stage1Layout(stage1_dir).episode_dir(unit.key)
+    videos = render_videos(env, states, folder, list(v.cameras), v.fps, v.resolution, v.quality)
     return with_videos(record, videos, v.fps)
 
 
@@ -157,21 +159,21 @@ def run_shard(job: tuple[Shard, dict, str, PolicyFactory | None], emit) -> int:
     shard, cfg_dict, stage1_dir, factory = job
     cfg = Config.model_validate(cfg_dict)
     v = cfg.stage1.video
-    stage1 = Path(stage1_dir)
-    done = Completions(stage1)
+    stage1 = Stage1Layout(Path(stage1_dir))
+    done = Completions(stage1.root)
     pending = [u for u in shard.units if not done.is_done(u.unit_id)]
     renders = _render_process() if pending and v.render != "none" else None  # spawns while the env builds
     waiting: dict[str, tuple[EpisodeUnit, EpisodeRecord]] = {}
     ran = 0
 
     def fail(unit: EpisodeUnit, reason: str, detail: str, text: str) -> None:
-        write_text(stage1 / "errors" / f"{unit.unit_id}.txt", text)
+        write_text(stage1.error(unit.unit_id), text)
         emit({"kind": "error", "unit": unit.unit_id, "reason": reason, "detail": detail})
 
     def finish(unit: EpisodeUnit, record: EpisodeRecord) -> None:
         nonlocal ran
         done.mark_done(unit.unit_id, record.model_dump(mode="json"))
-        (stage1 / "errors" / f"{unit.unit_id}.txt").unlink(missing_ok=True)
+        stage1.error(unit.unit_id).unlink(missing_ok=True)
         ran += 1
         emit({"kind": "episode", "unit": unit.unit_id, "success": record.success, "steps": record.steps})
 
@@ -192,9 +194,9 @@ def run_shard(job: tuple[Shard, dict, str, PolicyFactory | None], emit) -> int:
                     renders = _render_process()
                 if renders is not None:
                     renders.prepare(env, v.resolution, v.quality)  # model loads during the physics
-                record, states = run_physics(env, _policy(cfg.stage1.policy, factory), unit, cfg, stage1)
+                record, states = run_physics(env, _policy(cfg.stage1.policy, factory), unit, cfg, stage1.root)
                 if states is not None:
-                    renders.submit(unit.unit_id, env, states, stage1 / unit.rel_dir, list(v.cameras), v.fps,
+                    renders.submit(unit.unit_id, env, states, stage1.episode_dir(unit.key), list(v.cameras), v.fps,
                                    v.resolution, v.quality)
             except FatalError:
                 raise

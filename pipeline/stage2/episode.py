@@ -28,13 +28,14 @@ from pipeline.atomic import write_json
 from pipeline.config import Stage2Config
 from pipeline.errors import EpisodeError
 from pipeline.evidence import compute_evidence, write_evidence
-from pipeline.records import EpisodeRecord, Localization, QuarantineEntry, QuarantineReason
-from pipeline.stage2.history import build_history, render_frames, write_history
-from pipeline.stage2.layout import Stage2Paths, load_episode
 from pipeline.labelers.base import Episode, Onset, Provenance
 from pipeline.labelers.simstate.labeler import SimstateLocalizer
+from pipeline.layout import Stage2Layout
+from pipeline.records import EpisodeRecord, Localization, QuarantineEntry, QuarantineReason
+from pipeline.stage2.history import build_history, render_frames, write_history
+from pipeline.stage2.layout import load_episode
 from pipeline.stage2.phases import settled_step, split_phases, step_for_time
-from pipeline.stage2.scenes import scene_stem, write_scene
+from pipeline.stage2.scenes import write_scene
 
 SIMSTATE = SimstateLocalizer()
 
@@ -50,7 +51,7 @@ class Outcome:
     onset_kind: str = ""
 
 
-def _quarantine(paths: Stage2Paths, rec: EpisodeRecord, entry: QuarantineEntry) -> Outcome:
+def _quarantine(paths: Stage2Layout, rec: EpisodeRecord, entry: QuarantineEntry) -> Outcome:
     paths.abs(paths.localization(rec)).unlink(missing_ok=True)
     write_json(paths.abs(paths.quarantine(rec)), entry.model_dump(mode="json"))
     return Outcome(key=rec.key, status="quarantine", reason=entry.reason, source=entry.source)
@@ -66,7 +67,7 @@ def run_relative(file: str | None, run: Path) -> str | None:
         return file
 
 
-def process_episode(env, rec: EpisodeRecord, stage1: Path, paths: Stage2Paths, cfg: Stage2Config,
+def process_episode(env, rec: EpisodeRecord, stage1: Path, paths: Stage2Layout, cfg: Stage2Config,
                     vlm: Onset | None = None) -> Outcome:
     """`vlm`: None for simstate, else the VLM step's stored answer (a fail_time_s or a reason)."""
     try:
@@ -80,7 +81,7 @@ def process_episode(env, rec: EpisodeRecord, stage1: Path, paths: Stage2Paths, c
     ev = compute_evidence(env, ep.states, grip, rec.control_hz)
     ev_rel = paths.evidence(rec)
     write_evidence(paths.abs(ev_rel), ev)
-    sim = SIMSTATE.localize([Episode(rec, stage1 / rec.path, evidence=ev)])[0]  # always: events + agreement
+    sim = SIMSTATE.localize([Episode(rec, ep.folder, evidence=ev)])[0]  # always: events + agreement
     source = vlm.source if vlm else sim.source
     trace = (vlm or Provenance(source=source)).trace()
 
@@ -116,9 +117,10 @@ def process_episode(env, rec: EpisodeRecord, stage1: Path, paths: Stage2Paths, c
         hist = build_history(ep.states, ep.steps, onset, cfg.history_frames, cfg.history_stride_steps,
                              rec.control_hz)
         frames = render_frames(env, hist, list(cfg.history_cameras), cfg.history_resolution)
-        hist_path = bddl.parent / f"{scene_stem(scene_step)}_history.npz"
+        scene = paths.scene(rec.key, scene_step)
+        hist_path = scene.history
         write_history(hist_path, hist)
-        write_history(bddl.parent / f"{scene_stem(scene_step)}_history_frames.npz", frames)
+        write_history(scene.history_frames, frames)
         history_rel = str(hist_path.relative_to(paths.root))
     loc = Localization(
         key=rec.key, suite=rec.suite, task=rec.task, episode_id=rec.episode_id, instruction=rec.instruction,

@@ -1,6 +1,6 @@
-"""Where stage 2 reads stage 1's episodes and writes its own files (paths only, no IO
-except `load_episode`, which checks every input it reads, and `fingerprint`, which stats
-them). The folder layout is documented in pipeline/stage2/run.py."""
+"""How stage 2 reads stage 1's episodes: `load_episode` checks every input it reads, and
+`fingerprint` stats them. The paths come from pipeline/layout.py (`Stage1Layout`,
+`Stage2Layout`); the folder layout is documented in docs/data-format.md."""
 
 from __future__ import annotations
 
@@ -13,39 +13,18 @@ import pyarrow.parquet as pq
 
 from pipeline.atomic import file_stamp
 from pipeline.errors import EpisodeError
+from pipeline.layout import Stage1Layout, Stage2Layout
+from pipeline.layout import unit_id as layout_unit_id
 from pipeline.records import EpisodeRecord
 
-
-@dataclass(frozen=True)
-class Stage2Paths:
-    root: Path  # <run>/stage2
-
-    def _rel(self, kind: str, rec: EpisodeRecord, suffix: str) -> Path:
-        return Path(kind) / rec.suite / rec.task / f"{rec.episode_id}{suffix}"
-
-    def evidence(self, rec: EpisodeRecord) -> Path:
-        return self._rel("evidence", rec, ".parquet")
-
-    def localization(self, rec: EpisodeRecord) -> Path:
-        return self._rel("localizations", rec, ".json")
-
-    def quarantine(self, rec: EpisodeRecord) -> Path:
-        return self._rel("quarantine", rec, ".json")
-
-    def quarantine_for_key(self, key: str) -> Path:
-        """A manifest row with no usable record still has a key (see records.read_episode_rows)."""
-        return Path("quarantine") / f"{key}.json"
-
-    def vlm(self, rec: EpisodeRecord) -> Path:
-        return self._rel("vlm", rec, ".json")
-
-    def abs(self, rel: Path) -> Path:
-        return self.root / rel
+# the old name of pipeline.layout.Stage2Layout, kept only for code written against it before
+# the layout moved (nothing in pipeline/ uses it)
+Stage2Paths = Stage2Layout
 
 
 def unit_id(rec: EpisodeRecord) -> str:
     """Done-marker name of an episode (a file name: no slashes)."""
-    return f"{rec.suite}__{rec.task}__{rec.episode_id}"
+    return layout_unit_id(rec.key)
 
 
 @dataclass
@@ -57,8 +36,7 @@ class Stage1Episode:
     frames: pa.Table | None
 
     def video(self, camera: str = "agentview") -> Path | None:
-        name = self.record.videos.get(camera)
-        return self.folder / name if name else None
+        return Stage1Layout.video_in(self.folder, self.record, camera)
 
 
 def _bad(reason: str, path: Path, field: str, what: str) -> EpisodeError:
@@ -106,14 +84,14 @@ def _read_steps(path: Path, rec: EpisodeRecord) -> dict[str, np.ndarray]:
 def load_episode(stage1: Path, rec: EpisodeRecord) -> Stage1Episode:
     """Read an episode's logs; a missing, truncated or inconsistent file is an EpisodeError naming
     the file and the field."""
-    folder = Path(stage1) / rec.path
-    states_path, steps_path = folder / "states.npy", folder / "steps.parquet"
+    files = Stage1Layout(Path(stage1)).episode(rec)
+    folder, states_path, steps_path = files.dir, files.states, files.steps
     for p in (states_path, steps_path):
         if not p.exists():
             raise _bad("stage1_missing_file", p, "<file>", "no such file")
     states = _read_states(states_path, rec)
     cols = _read_steps(steps_path, rec)
-    frames_path = folder / "frames.parquet"
+    frames_path = files.frames
     try:
         frames = pq.read_table(frames_path) if frames_path.exists() else None
     except (pa.ArrowException, OSError) as e:
@@ -125,8 +103,8 @@ def load_episode(stage1: Path, rec: EpisodeRecord) -> Stage1Episode:
 
 def input_files(stage1: Path, rec: EpisodeRecord) -> list[Path]:
     """The stage-1 files an episode's stage-2 outcome is computed from."""
-    folder = Path(stage1) / rec.path
-    return [folder / n for n in ("states.npy", "steps.parquet", "frames.parquet", *sorted(rec.videos.values()))]
+    files = Stage1Layout(Path(stage1)).episode(rec)
+    return [files.states, files.steps, files.frames, *(files.dir / n for n in sorted(rec.videos.values()))]
 
 
 def fingerprint(stage1: Path, rec: EpisodeRecord) -> dict[str, str]:

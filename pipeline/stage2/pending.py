@@ -16,24 +16,26 @@ import shutil
 
 from pipeline.atomic import Completions, write_json
 from pipeline.config import Config
+from pipeline.layout import RunLayout, Stage2Layout
 from pipeline.errors import FatalError
 from pipeline.records import EpisodeRecord, ManifestProblem, QuarantineEntry, QuarantineReason, read_episode_rows
-from pipeline.stage2.layout import Stage2Paths, fingerprint, unit_id
+from pipeline.stage2.layout import fingerprint, unit_id
 
 
-def pending_failures(cfg: Config, paths: Stage2Paths) -> tuple[list[EpisodeRecord], int, int]:
+def pending_failures(cfg: Config, paths: Stage2Layout) -> tuple[list[EpisodeRecord], int, int]:
     """(failed episodes not yet done, failed total, successes skipped). A failed episode is
     done when its marker exists and names the inputs it has now (layout.fingerprint); markers
     written before fingerprints existed count as done. Manifest rows that make no record are
     set aside here (`stage1_bad_manifest`), the rest go on."""
-    manifest = cfg.out / "stage1" / "episodes.parquet"
+    layout = RunLayout.of(cfg)
+    manifest = layout.stage1.manifest
     if not manifest.exists():
         raise FatalError(f"{manifest}: no stage 1 manifest; run `recover stage1` first")
     try:
         episodes, problems = read_episode_rows(manifest)
     except Exception as e:  # the whole file unreadable (truncated): nothing to set aside row by row
         raise FatalError(f"{manifest}: unreadable stage 1 manifest ({type(e).__name__}: {e})") from None
-    _set_aside_manifest_rows(paths, problems)
+    _set_aside_manifest_rows(paths, problems, layout.rel(manifest).as_posix())
     failed = [e for e in episodes if not e.success]
     done = Completions(paths.root)
     done_ids = done.done_ids()
@@ -41,7 +43,7 @@ def pending_failures(cfg: Config, paths: Stage2Paths) -> tuple[list[EpisodeRecor
     for e in failed:
         if unit_id(e) in done_ids:
             recorded = (done.info(unit_id(e)) or {}).get("inputs")
-            if recorded is None or recorded == fingerprint(cfg.out / "stage1", e):
+            if recorded is None or recorded == fingerprint(layout.stage1.root, e):
                 continue
             _forget(paths, e)  # its inputs changed since: the stored answers are about old files
         todo.append(e)
@@ -49,10 +51,10 @@ def pending_failures(cfg: Config, paths: Stage2Paths) -> tuple[list[EpisodeRecor
     return todo, len(failed) + sum(p.success is not True for p in problems), n_success
 
 
-def _set_aside_manifest_rows(paths: Stage2Paths, problems: list[ManifestProblem]) -> None:
+def _set_aside_manifest_rows(paths: Stage2Layout, problems: list[ManifestProblem], manifest: str) -> None:
     """One quarantine entry per bad manifest row (a row whose success cell says True is no
-    failure and is skipped like the other successes); entries of rows fixed since go away."""
-    manifest = "stage1/episodes.parquet"
+    failure and is skipped like the other successes); entries of rows fixed since go away.
+    `manifest` is the manifest's path relative to the run, as the entries name it."""
     wanted = {}
     for p in problems:
         if p.success is True:
@@ -60,7 +62,7 @@ def _set_aside_manifest_rows(paths: Stage2Paths, problems: list[ManifestProblem]
         wanted[p.key] = QuarantineEntry(key=p.key, stage="stage2", source="stage2", reason=QuarantineReason.stage1_bad_manifest,
                                         detail=f"{manifest} row {p.row}: field {p.field}: {p.detail}",
                                         file=manifest, field=p.field).model_dump(mode="json")
-    q_root = paths.root / "quarantine"
+    q_root = paths.quarantine_dir
     for f in sorted(q_root.rglob("*.json")) if q_root.exists() else []:
         try:
             old = json.loads(f.read_text())
@@ -74,9 +76,7 @@ def _set_aside_manifest_rows(paths: Stage2Paths, problems: list[ManifestProblem]
             write_json(target, entry)
 
 
-def _forget(paths: Stage2Paths, rec: EpisodeRecord) -> None:
+def _forget(paths: Stage2Layout, rec: EpisodeRecord) -> None:
     """Drop what an episode's old inputs produced that the redo would not overwrite."""
-    from pipeline.stage2.scenes import scene_dir  # imports the simulator: only when needed
-
     paths.abs(paths.vlm(rec)).unlink(missing_ok=True)  # the VLM is asked again about the new video
-    shutil.rmtree(scene_dir(paths.root, rec.suite, rec.task, rec.episode_id), ignore_errors=True)
+    shutil.rmtree(paths.scene_dir(rec.key), ignore_errors=True)

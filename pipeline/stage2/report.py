@@ -24,6 +24,7 @@ from pydantic import BaseModel, ConfigDict
 from pipeline.arrow import I64, arrow_schema
 from pipeline.atomic import write_json, write_with
 from pipeline.errors import invalid_file
+from pipeline.layout import Stage2Layout
 from pipeline.records import EventKind, Localization, QuarantineEntry, QuarantineReason
 
 
@@ -35,8 +36,9 @@ def _read(model, path: Path):
 
 
 def load_outputs(stage2: Path) -> tuple[list[Localization], list[QuarantineEntry]]:
-    locs = [_read(Localization, p) for p in sorted((stage2 / "localizations").rglob("*.json"))]
-    quar = [_read(QuarantineEntry, p) for p in sorted((stage2 / "quarantine").rglob("*.json"))]
+    paths = Stage2Layout(Path(stage2))
+    locs = [_read(Localization, p) for p in sorted(paths.localizations_dir.rglob("*.json"))]
+    quar = [_read(QuarantineEntry, p) for p in sorted(paths.quarantine_dir.rglob("*.json"))]
     return locs, quar
 
 
@@ -105,7 +107,7 @@ def write_agreement(stage2: Path, locs: list[Localization]) -> dict | None:
     result = agreement(pairs).model_dump()
     result.update(vlm_localized=len(vlm), simstate_missing=len(vlm) - len(pairs),
                   sources=sorted({f"{loc.source}:{loc.model}" for loc in vlm}))
-    write_json(stage2 / "agreement.json", result)
+    write_json(Stage2Layout(Path(stage2)).agreement, result)
     import matplotlib
 
     matplotlib.use("Agg")
@@ -121,7 +123,7 @@ def write_agreement(stage2: Path, locs: list[Localization]) -> dict | None:
     mae = "n/a" if result["mae_s"] is None else f"{result['mae_s']:.2f} s"
     ax.set_title(f"n={result['n']}  MAE={mae}")
     fig.tight_layout()
-    write_with(stage2 / "agreement.png", lambda p: fig.savefig(p, format="png"))
+    write_with(Stage2Layout(Path(stage2)).agreement_figure, lambda p: fig.savefig(p, format="png"))
     plt.close(fig)
     return result
 
@@ -129,7 +131,7 @@ def write_agreement(stage2: Path, locs: list[Localization]) -> dict | None:
 def write_reports(stage2: Path) -> dict:
     locs, quar = load_outputs(stage2)
     table = localization_table(locs)
-    write_with(stage2 / "localizations.parquet", lambda p: pq.write_table(table, p))
+    write_with(Stage2Layout(Path(stage2)).localizations_table, lambda p: pq.write_table(table, p))
     summary = {
         "scenes": len(locs),
         "quarantined": len(quar),
@@ -141,5 +143,5 @@ def write_reports(stage2: Path) -> dict:
         "onset_kinds": dict(Counter(r for r in table.column("onset_kind").to_pylist()) if locs else {}),
         "agreement": write_agreement(stage2, locs),
     }
-    write_json(stage2 / "summary.json", summary)
+    write_json(Stage2Layout(Path(stage2)).summary, summary)
     return summary

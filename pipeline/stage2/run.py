@@ -44,8 +44,8 @@ from rich.table import Table
 
 from pipeline.config import Config, save_resolved
 from pipeline.executors import make_executor
+from pipeline.layout import RunLayout
 from pipeline.records import EpisodeRecord
-from pipeline.stage2.layout import Stage2Paths
 from pipeline.stage2.pending import pending_failures
 from pipeline.stage2.report import write_reports
 from pipeline.stage2.worker import TaskUnit, process_task
@@ -67,7 +67,7 @@ def _progress() -> Progress:
 
 
 def run(cfg: Config) -> dict:
-    paths = Stage2Paths(cfg.out / "stage2")
+    paths = RunLayout.of(cfg).stage2
     paths.root.mkdir(parents=True, exist_ok=True)
     save_resolved(cfg, paths.root)
     todo, n_failed, n_success = pending_failures(cfg, paths)

@@ -23,16 +23,9 @@ import numpy as np
 
 from pipeline.atomic import write_text, write_with
 from pipeline.errors import EpisodeError
+from pipeline.layout import episode_key, scene_files
 from pipeline.sim.env import parse_bddl
 from pipeline.stage2.bddl_normalize import normalize_bddl
-
-
-def scene_dir(stage2: Path, suite: str, task: str, episode_id: str) -> Path:
-    return Path(stage2) / f"selected_bddl_scenes_{suite}" / task / f"episode_{episode_id}"
-
-
-def scene_stem(step: int) -> str:
-    return f"step_{step:04d}"
 
 
 def _declared_objects(parsed: dict) -> list[str]:
@@ -61,13 +54,11 @@ def check_scene(env, bddl_text: str, state: np.ndarray, scratch: Path) -> None:
 def write_scene(stage2: Path, env, suite: str, task: str, episode_id: str, step: int,
                 state: np.ndarray) -> tuple[Path, Path]:
     """Check and write the BDDL + npy pair; return their paths."""
-    folder = scene_dir(stage2, suite, task, episode_id)
-    stem = scene_stem(step)
+    files = scene_files(stage2, episode_key(suite, task, episode_id), step)
     bddl = normalize_bddl(Path(env.task.bddl_path).read_text())
     state = np.asarray(state, dtype=np.float64)
-    check_scene(env, bddl, state, folder / f".{stem}.check.bddl")
-    npy_path = folder / f"{stem}_sim_state.npy"
-    bddl_path = folder / f"{stem}.bddl"
+    check_scene(env, bddl, state, files.check_scratch)
+    npy_path, bddl_path = files.state, files.bddl
     write_with(npy_path, lambda p: np.save(p, state))
     write_text(bddl_path, bddl)
     return bddl_path, npy_path

@@ -15,18 +15,17 @@ The episode workers read these files (pipeline/stage2/worker.py). Requests go in
 from __future__ import annotations
 
 from collections.abc import Callable
-from pathlib import Path
 
 from pipeline.atomic import write_json
 from pipeline.config import Config
 from pipeline.labelers.base import Episode, Onset
+from pipeline.layout import RunLayout, Stage2Layout
 from pipeline.records import EpisodeRecord, QuarantineReason
-from pipeline.stage2.layout import Stage2Paths
 
 BATCH = 32
 
 
-def run_vlm(cfg: Config, episodes: list[EpisodeRecord], paths: Stage2Paths,
+def run_vlm(cfg: Config, episodes: list[EpisodeRecord], paths: Stage2Layout,
             on_result: Callable[[], None] | None = None) -> int:
     """Localize every episode without a stored VLM result; return how many were asked."""
     import pyarrow as pa
@@ -34,7 +33,7 @@ def run_vlm(cfg: Config, episodes: list[EpisodeRecord], paths: Stage2Paths,
 
     from pipeline.labelers.registry import make_localizer
 
-    stage1 = cfg.out / "stage1"
+    stage1 = RunLayout.of(cfg).stage1
     todo = [r for r in episodes if not paths.abs(paths.vlm(r)).exists()]
     if not todo:
         return 0
@@ -44,19 +43,19 @@ def run_vlm(cfg: Config, episodes: list[EpisodeRecord], paths: Stage2Paths,
         for i in range(0, len(todo), BATCH):
             batch: list[Episode] = []
             for rec in todo[i : i + BATCH]:
-                folder = stage1 / rec.path
-                video = rec.videos.get("agentview")
-                if not video or not (folder / video).exists():
+                folder = stage1.episode(rec).dir
+                video = stage1.video(rec, "agentview")
+                if video is None or not video.exists():
                     batch.append(Episode(rec, folder))  # the localizer answers no_video
                     continue
-                fp = folder / "frames.parquet"
+                fp = stage1.episode(rec).frames
                 try:
                     frames = pq.read_table(fp) if fp.exists() else None
                 except (pa.ArrowException, OSError) as e:  # truncated: the episode worker sets it aside
                     bad = Onset(source=localizer.name, reason=QuarantineReason.stage1_bad_frames, detail=f"{fp}: unreadable ({e})")
                     write_json(paths.abs(paths.vlm(rec)), bad.stored())
                     continue
-                batch.append(Episode(rec, folder, Path(folder / video), frames))
+                batch.append(Episode(rec, folder, video, frames))
             for ep, onset in zip(batch, localizer.localize(batch, progress=on_result), strict=True):
                 write_json(paths.abs(paths.vlm(ep.record)), onset.stored())
             asked += sum(ep.video is not None for ep in batch)

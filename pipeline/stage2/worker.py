@@ -66,20 +66,21 @@ def _stored_onset(paths, rec: EpisodeRecord, backend: str) -> Onset | None:
 
 def process_task(unit: TaskUnit, emit) -> list[dict]:
     from pipeline.stage2.episode import process_episode
-    from pipeline.stage2.layout import Stage2Paths, fingerprint, unit_id
+    from pipeline.layout import RunLayout
+    from pipeline.stage2.layout import fingerprint, unit_id
 
-    run = Path(unit.run_dir)
+    layout = RunLayout(Path(unit.run_dir))
     cfg = Stage2Config.model_validate_json(unit.stage2_cfg)
-    paths = Stage2Paths(run / "stage2")
+    paths = layout.stage2
     done = Completions(paths.root)
     env = _env_for(unit.suite, unit.task)
     results = []
     for raw in unit.episodes:
         rec = EpisodeRecord.model_validate_json(raw)
-        inputs = fingerprint(run / "stage1", rec)  # before reading: a file changed meanwhile is redone
+        inputs = fingerprint(layout.stage1.root, rec)  # before reading: a file changed meanwhile is redone
         try:
             vlm = _stored_onset(paths, rec, cfg.vlm.backend)
-            out = process_episode(env, rec, run / "stage1", paths, cfg, vlm)
+            out = process_episode(env, rec, layout.stage1.root, paths, cfg, vlm)
             done.mark_done(unit_id(rec), {"status": out.status, "reason": out.reason, "inputs": inputs})
         except FatalError:
             raise

@@ -24,6 +24,7 @@ from pathlib import Path
 from pydantic import ValidationError
 
 from pipeline.atomic import file_stamp
+from pipeline.layout import RunLayout, episode_key, is_key, unit_id
 from pipeline.records import Localization, QuarantineEntry, QuarantineReason
 from pipeline.sim.render import CAMERAS
 
@@ -56,7 +57,7 @@ class Unit:
 
     @property
     def unit_id(self) -> str:
-        return self.key.replace("/", "__")
+        return unit_id(self.key)
 
 
 def fingerprint(run_dir: Path, unit: Unit) -> str:
@@ -70,8 +71,7 @@ def fingerprint(run_dir: Path, unit: Unit) -> str:
             h.update(path.read_bytes())
         except OSError:
             h.update(b"missing")
-    suite, task, ep = unit.key.split("/", 2)
-    ev = run_dir / "stage2" / "evidence" / suite / task / f"{ep}.parquet"
+    ev = RunLayout(run_dir).stage2.evidence_of_key(unit.key)
     if ev.is_file():
         h.update(file_stamp(ev).encode())
     return h.hexdigest()[:16]
@@ -99,7 +99,7 @@ def _lengths(run_dir: Path) -> dict[str, float]:
     """Latest valid onset time by key, from the stage-1 manifest (rows that read): the last
     state's time plus one video frame, since a VLM sees a video of total_frames / fps seconds
     (pipeline.labelers.vlm.video_input) and may answer up to its end."""
-    manifest = run_dir / "stage1" / "episodes.parquet"
+    manifest = RunLayout(run_dir).stage1.manifest
     if not manifest.is_file():
         return {}
     from pipeline.records import read_episode_rows
@@ -130,9 +130,9 @@ def collect(run_dir: Path) -> list[Unit]:
     queued as a quarantined item) when its file does not parse, its fail_time_s is not a time
     inside the episode, or its key is claimed by another file too: the file stored under that
     key keeps it, every other claimant is set aside under the key its own path names."""
-    s2 = run_dir / "stage2"
+    s2 = RunLayout(run_dir).stage2
     units: dict[str, Unit] = {}
-    loc_root, q_root = s2 / "localizations", s2 / "quarantine"
+    loc_root, q_root = s2.localizations_dir, s2.quarantine_dir
     claims: dict[str, list[tuple[Path, Localization]]] = {}
 
     def set_aside(path: Path, reason: QuarantineReason, detail: str, field: str | None, loc: Localization | None = None) -> None:
@@ -148,7 +148,7 @@ def collect(run_dir: Path) -> list[Unit]:
         except (ValidationError, ValueError, OSError) as e:
             set_aside(path, QuarantineReason.unreadable, *_problem(path, e))
             continue
-        if loc.key != f"{loc.suite}/{loc.task}/{loc.episode_id}":  # every later step splits the key
+        if loc.key != episode_key(loc.suite, loc.task, loc.episode_id):  # every later step splits the key
             set_aside(path, QuarantineReason.key_mismatch, f"{path}: field key: {loc.key!r} is not "
                       f"suite/task/episode_id ({loc.suite}/{loc.task}/{loc.episode_id})", "key", loc)
             continue
@@ -174,7 +174,7 @@ def collect(run_dir: Path) -> list[Unit]:
             detail, field = _problem(path, e)
             q = QuarantineEntry(key=key, stage="stage3", source="stage2", reason=QuarantineReason.unreadable, detail=detail,
                                 file=_rel(run_dir, path), field=field)
-        if len(q.key.split("/")) != 3:
+        if not is_key(q.key):
             q = q.model_copy(update={"key": _key_from_path(q_root, path)})
         if q.key not in units:
             units[q.key] = Unit(q.key, quarantine=q, source=path)
@@ -186,8 +186,8 @@ def _duration_of(run_dir: Path, key: str) -> float | None:
     evidence (last step), when the manifest has no row; None when neither reads."""
     import pyarrow.parquet as pq
 
-    suite, task, ep = key.split("/", 2)
-    frames = run_dir / "stage1" / "episodes" / suite / task / ep / "frames.parquet"
+    layout = RunLayout(run_dir)
+    frames = layout.stage1.episode_of_key(key).frames
     if frames.is_file():
         try:
             times = sorted(pq.read_table(frames, columns=["time_s"]).column("time_s").to_pylist())
@@ -195,8 +195,8 @@ def _duration_of(run_dir: Path, key: str) -> float | None:
                 return times[-1] + (times[-1] - times[-2] if len(times) > 1 else 0.0)
         except UNREADABLE as e:  # try the evidence
             warn_unreadable(frames, e, "the episode's length comes from its evidence")
-    ev = Path("stage2") / "evidence" / suite / task / f"{ep}.parquet"
-    return _duration(run_dir, None, ev.as_posix() if (run_dir / ev).is_file() else None)
+    ev = layout.stage2.evidence_of_key(key)
+    return _duration(run_dir, None, layout.rel(ev).as_posix() if ev.is_file() else None)
 
 
 def _video_fps(path: Path) -> float | None:
@@ -213,13 +213,12 @@ def _video_fps(path: Path) -> float | None:
 
 def context(run_dir: Path, unit: Unit, control_hz: int, default_fps: float) -> dict:
     """Media paths (relative to the run folder), timing, phases and events of one episode."""
-    suite, task, ep = unit.key.split("/", 2)
-    ep_dir = Path("stage1") / "episodes" / suite / task / ep
-    videos = {cam: (ep_dir / f"video_{cam}.mp4").as_posix() for cam in CAMERAS
-              if (run_dir / ep_dir / f"video_{cam}.mp4").is_file()}
-    frames = (ep_dir / "frames.parquet").as_posix() if (run_dir / ep_dir / "frames.parquet").is_file() else None
-    ev = Path("stage2") / "evidence" / suite / task / f"{ep}.parquet"
-    evidence = ev.as_posix() if (run_dir / ev).is_file() else None
+    layout = RunLayout(run_dir)
+    files = layout.stage1.episode_of_key(unit.key)
+    videos = {cam: layout.rel(files.video(cam)).as_posix() for cam in CAMERAS if files.video(cam).is_file()}
+    frames = layout.rel(files.frames).as_posix() if files.frames.is_file() else None
+    ev = layout.stage2.evidence_of_key(unit.key)
+    evidence = layout.rel(ev).as_posix() if ev.is_file() else None
     fps = _video_fps(run_dir / next(iter(videos.values()))) if videos else None
     duration = _duration(run_dir, frames, evidence)
     loc = unit.localization

@@ -33,6 +33,7 @@ from rich.progress import Progress
 from pipeline.atomic import Completions, write_json
 from pipeline.config import Config, save_resolved
 from pipeline.errors import FatalError
+from pipeline.layout import RunLayout, parse_key
 from pipeline.records import Characterization, QuarantineEntry, QuarantineReason
 from pipeline.review.db import write_session
 from pipeline.review.enqueue import enqueue
@@ -69,8 +70,8 @@ def proposal_for(unit: Unit, ch: Characterization | None, q: QuarantineEntry | N
 
 
 def run(cfg: Config) -> dict:
-    run_dir = Path(cfg.out)
-    s3 = run_dir / "stage3"
+    layout = RunLayout.of(cfg)
+    run_dir, s3 = layout.root, layout.stage3.root
     save_resolved(cfg, s3)
     units = collect(run_dir)
     done = Completions(s3)
@@ -81,7 +82,7 @@ def run(cfg: Config) -> dict:
     counts: Counter = Counter(skipped=len(units) - len(todo))
     console = Console()
     if not units:
-        console.print(f"[yellow]stage 3: nothing to do[/yellow]: no stage-2 outputs under {run_dir / 'stage2'}")
+        console.print(f"[yellow]stage 3: nothing to do[/yellow]: no stage-2 outputs under {layout.stage2.root}")
     characterizer = make_characterizer(cfg.stage3.vlm, run_dir) if any(u.localization for u in todo) else None
     hz, fps = cfg.stage1.rollout.control_hz, float(cfg.stage1.video.fps)
     try:
@@ -109,7 +110,7 @@ def run(cfg: Config) -> dict:
               and u.quarantine.reason in (*INPUT_FAULTS, QuarantineReason.bad_proposal)]
     summary = {"episodes": len(units), **counts, "set_aside": len(faults),
                "input_faults": [{"key": q.key, "reason": q.reason, "file": q.file, "field": q.field} for q in faults]}
-    write_json(s3 / "summary.json", summary)
+    write_json(layout.stage3.summary, summary)
     console.print(f"stage 3: { {k: v for k, v in summary.items() if k != 'input_faults'} }")
     if faults:  # queued as quarantined items (people supply the values), never as proposals
         console.print(f"[yellow]stage 3: {len(faults)} set aside[/yellow] for bad stage-2 input "
@@ -142,11 +143,10 @@ def _signature(cfg: Config) -> str:
 
 
 def _store(run_dir: Path, cfg: Config, engine, unit: Unit, outcome, hz: int, fps: float) -> str:
-    suite, task, ep = unit.key.split("/", 2)
     ch = outcome if isinstance(outcome, Characterization) else None
     q = outcome if isinstance(outcome, QuarantineEntry) else None
-    char_file = run_dir / "stage3" / "characterizations" / suite / task / f"{ep}.json"
-    q_file = run_dir / "stage3" / "quarantine" / suite / task / f"{ep}.json"
+    s3 = RunLayout(run_dir).stage3
+    char_file, q_file = s3.characterization(unit.key), s3.quarantine(unit.key)
     if ch is not None:
         write_json(char_file, ch.model_dump(mode="json"))
         q_file.unlink(missing_ok=True)  # an earlier characterizer's failure no longer applies
@@ -189,11 +189,11 @@ def _bad_proposal(run_dir: Path, unit: Unit, ch: Characterization | None, e: Inv
 
 def _instruction(run_dir: Path, unit: Unit) -> str:
     """A quarantined episode's instruction, from the stage-1 manifest when it is there."""
-    manifest = run_dir / "stage1" / "episodes.parquet"
+    manifest = RunLayout(run_dir).stage1.manifest
     if manifest.is_file():
         import pyarrow.parquet as pq
 
-        suite, task, ep = unit.key.split("/", 2)
+        suite, task, ep = parse_key(unit.key)
         try:
             rows = pq.read_table(manifest, columns=["suite", "task", "episode_id", "instruction"]).to_pylist()
         except UNREADABLE as e:  # an unreadable manifest is stage 2's to report; the key still names the task
@@ -202,4 +202,4 @@ def _instruction(run_dir: Path, unit: Unit) -> str:
         for row in rows:
             if (row["suite"], row["task"], row["episode_id"]) == (suite, task, ep) and row["instruction"]:
                 return row["instruction"]
-    return unit.key.split("/")[1].replace("_", " ")
+    return parse_key(unit.key)[1].replace("_", " ")

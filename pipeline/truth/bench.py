@@ -39,6 +39,7 @@ from pipeline.config import Config
 from pipeline.errors import FatalError
 from pipeline.labelers.base import Characterizer, Episode
 from pipeline.labelers.registry import make_characterizer, make_localizer
+from pipeline.layout import REPORT, RunLayout, Stage1Layout
 from pipeline.records import Category, Characterization, EpisodeRecord, Level, Localization, Phases, read_episodes
 from pipeline.truth.derive import EpisodeTruth, TruthError, episode_truth
 
@@ -57,14 +58,15 @@ class Prediction:
 
 def load_truths(run_dir: Path) -> tuple[list[EpisodeRecord], dict[str, EpisodeTruth], dict[str, str]]:
     """Failed episodes, their truths, and key -> reason for those set aside."""
-    manifest = run_dir / "stage1" / "episodes.parquet"
+    stage1 = RunLayout(run_dir).stage1
+    manifest = stage1.manifest
     if not manifest.is_file():
         raise FatalError(f"{manifest}: no stage 1 manifest; run `recover stage1` first")
     failed = [r for r in read_episodes(manifest) if not r.success]
     truths, aside = {}, {}
     for rec in failed:
         try:
-            truths[rec.key] = episode_truth(run_dir / "stage1" / rec.path / "truth.parquet", rec.key, rec.control_hz)
+            truths[rec.key] = episode_truth(stage1.episode(rec).truth, rec.key, rec.control_hz)
         except TruthError as e:
             aside[rec.key] = f"{e.reason}: {e}"
     return failed, truths, aside
@@ -76,12 +78,12 @@ def _episode(stage1: Path, rec: EpisodeRecord, evidence=None) -> Episode:
     the localizer's `no_video`), and the evidence when the caller measured it."""
     import pyarrow.parquet as pq
 
-    folder = stage1 / rec.path
-    video = rec.videos.get("agentview")
-    if evidence is not None or not video or not (folder / video).is_file():
+    layout = Stage1Layout(stage1)
+    folder, video = layout.episode(rec).dir, layout.video(rec, "agentview")
+    if evidence is not None or video is None or not video.is_file():
         return Episode(rec, folder, evidence=evidence)
-    fp = folder / "frames.parquet"
-    return Episode(rec, folder, folder / video, pq.read_table(fp) if fp.is_file() else None)
+    fp = layout.episode(rec).frames
+    return Episode(rec, folder, video, pq.read_table(fp) if fp.is_file() else None)
 
 
 def _stub_localization(rec: EpisodeRecord, step: int, time_s: float, source: str, phases: Phases | None = None,
@@ -104,10 +106,11 @@ def _characterize(characterizer: Characterizer, out: dict[str, Prediction], locs
 
 def predict_simstate(cfg: Config, records: list[EpisodeRecord]) -> dict[str, Prediction]:
     from pipeline.evidence import compute_evidence, read_evidence
-    from pipeline.stage2.layout import Stage2Paths, load_episode
+    from pipeline.stage2.layout import load_episode
     from pipeline.stage2.phases import split_phases
 
-    run_dir, paths = Path(cfg.out), Stage2Paths(Path(cfg.out) / "stage2")
+    layout = RunLayout.of(cfg)
+    run_dir, paths = layout.root, layout.stage2
     vlm_cfg = cfg.stage2.vlm.model_copy(update={"backend": "simstate"})
     localizer = make_localizer(vlm_cfg)
     evidence: dict[str, object] = {}
@@ -128,12 +131,12 @@ def predict_simstate(cfg: Config, records: list[EpisodeRecord]) -> dict[str, Pre
                         from pipeline.sim import build_env, get_task
 
                         env = build_env(get_task(suite, task))
-                    ep = load_episode(run_dir / "stage1", rec)
+                    ep = load_episode(layout.stage1.root, rec)
                     ev = compute_evidence(env, ep.states, ep.steps["action"][:, 6], rec.control_hz)
             except Exception as e:  # noqa: BLE001 - one bad episode is a miss, the rest go on
                 out[rec.key] = Prediction(rec.key, reason=f"evidence: {type(e).__name__}: {e}")
                 continue
-            [onset] = localizer.localize([_episode(run_dir / "stage1", rec, ev)])
+            [onset] = localizer.localize([_episode(layout.stage1.root, rec, ev)])
             if onset.fail_step is None:
                 out[rec.key] = Prediction(rec.key, reason=onset.reason or "no_failure_found")
                 continue
@@ -153,7 +156,7 @@ def predict_simstate(cfg: Config, records: list[EpisodeRecord]) -> dict[str, Pre
 def predict_vlm(cfg: Config, backend_name: str, records: list[EpisodeRecord]) -> dict[str, Prediction]:
     from pipeline.stage2.phases import step_for_time
 
-    stage1 = Path(cfg.out) / "stage1"
+    stage1 = RunLayout.of(cfg).stage1.root
     out: dict[str, Prediction] = {}
     episodes = [_episode(stage1, rec) for rec in records]
     if not any(e.video is not None for e in episodes):
@@ -303,9 +306,9 @@ def run(cfg: Config, localizer: str = "simstate", out: Path | None = None) -> di
               "set_aside": len(aside), "set_aside_reasons": dict(Counter(v.split(":")[0] for v in aside.values())),
               **score(truths, preds, hz), "set_aside_episodes": aside,
               "truth": {k: t.model_dump(mode="json") for k, t in truths.items()}}
-    folder = out or run_dir / "bench" / f"localize_{localizer}"
+    folder = out or RunLayout(run_dir).bench(localizer)
     write_json(folder / "report.json", report)
-    write_text(folder / "report.md", markdown(report, localizer, run_dir))
+    write_text(folder / REPORT, markdown(report, localizer, run_dir))
     report["plots"] = [str(folder / f"confusion_{k}.png") for k in ("level", "category")
                        if plot_confusion(folder / f"confusion_{k}.png", f"{localizer}: {k}", report[f"{k}_confusion"])]
     return report

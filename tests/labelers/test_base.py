@@ -14,8 +14,8 @@ from pipeline.labelers.registry import make_characterizer, make_localizer
 from pipeline.labelers.vlm.backends.base import VLMResult
 from pipeline.labelers.vlm.labeler import VLMCharacterizer, VLMLocalizer, onset_of
 from pipeline.records import EpisodeRecord, Localization
-from pipeline.review.sample_run import SUITE, TASK, build
 from tests.labelers.vlm.loopback_server import LoopbackServer
+from tests.review.sample_run import SUITE, TASK, build
 
 PROVENANCE_KEYS = ["source", "model", "prompt_name", "prompt_hash", "raw_text", "latency_s"]
 

@@ -10,10 +10,10 @@ from pipeline.records import Category, Characterization, Level
 from pipeline.review.auth import add_user
 from pipeline.review.db import make_engine, write_session
 from pipeline.review.enqueue import enqueue
-from pipeline.review.sample_run import INSTRUCTION, build
 from pipeline.review.workflow import QueueSettings
 from pipeline.stage3.inputs import collect, context
 from pipeline.stage3.run import proposal_for
+from tests.review.sample_run import INSTRUCTION, build
 
 ACTION = "Set the black bowl upright, then place it on the plate"
 

@@ -108,11 +108,11 @@ def test_a_manifest_that_cannot_be_read_at_all_is_fatal_and_named(tmp_path):
 def test_a_stored_vlm_answer_that_does_not_read_sets_only_its_episode_aside_naming_the_file(stage1_run, episodes,
                                                                                             tmp_path):
     from pipeline.labelers.base import Onset
-    from pipeline.stage2.layout import Stage2Paths
+    from pipeline.layout import RunLayout
 
     run_dir = tmp_path / "run"
     shutil.copytree(stage1_run, run_dir)
-    paths = Stage2Paths(run_dir / "stage2")
+    paths = RunLayout(run_dir).stage2
     failed = [r for r in episodes.values() if not r.success]
     good, bad = episodes["drop"], episodes["miss"]
     for rec in failed:  # every answer stored: the VLM step asks no server

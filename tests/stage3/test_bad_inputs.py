@@ -15,7 +15,7 @@ from typer.testing import CliRunner
 from pipeline.cli import app
 from pipeline.records import QuarantineEntry
 from pipeline.review.db import Item, make_engine, read_session
-from pipeline.review.sample_run import SUITE, TASK, build
+from tests.review.sample_run import SUITE, TASK, build
 
 EP = "scripted-i{:02d}-s0".format
 

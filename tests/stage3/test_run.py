@@ -14,8 +14,8 @@ from typer.testing import CliRunner
 from pipeline.cli import app
 from pipeline.records import Annotation, Characterization, QuarantineEntry
 from pipeline.review.db import Item, User, make_engine, read_session, write_session
-from pipeline.review.sample_run import SUITE, TASK, build
 from pipeline.review.workflow import QueueSettings, submit_review
+from tests.review.sample_run import SUITE, TASK, build
 
 runner = CliRunner()
 

@@ -11,9 +11,9 @@ from sqlalchemy import select
 
 from pipeline.config import load_config
 from pipeline.review.db import Item, make_engine, read_session
-from pipeline.review.sample_run import SUITE, TASK, build
 from pipeline.stage3.run import run as run_stage3
 from tests.labelers.vlm.loopback_server import LoopbackServer
+from tests.review.sample_run import SUITE, TASK, build
 
 ANSWER = json.dumps({"recovery_level": "l2", "failure_category": "Grasp Failure",
                      "recovery_action": "Grasp the black bowl again"})

@@ -21,6 +21,7 @@ from pipeline.labelers.base import CharacterizeOutcome, Episode, Onset, Progress
 from pipeline.labelers.simstate import characterizer as rules
 from pipeline.labelers.simstate.events import Thresholds
 from pipeline.labelers.simstate.localizer import localize
+from pipeline.layout import RunLayout, episode_key
 from pipeline.records import Localization, QuarantineReason
 
 SOURCE = "simstate"
@@ -64,7 +65,7 @@ class SimstateCharacterizer:
         self._evidence_for = evidence_for
 
     def _path(self, loc: Localization) -> Path:
-        return self.run_dir / "stage2" / "evidence" / loc.suite / loc.task / f"{loc.episode_id}.parquet"
+        return RunLayout(self.run_dir).stage2.evidence_of_key(episode_key(loc.suite, loc.task, loc.episode_id))
 
     def _one(self, loc: Localization) -> CharacterizeOutcome:
         path = self._path(loc)

@@ -19,8 +19,10 @@ from pipeline.config import VLMConfig
 from pipeline.errors import FatalError
 from pipeline.labelers.base import CharacterizeOutcome, Episode, Onset, Progress, Provenance
 from pipeline.labelers.vlm.backends import VLMBackend, VLMRequest, VLMResult, make_backend
+from pipeline.layout import RunLayout
 from pipeline.records import Characterization, Localization, QuarantineReason
 
+CAMERA = "agentview"  # the camera the VLM sees, for localization (stage2.vlm_step) and characterization
 
 def _duration(result: VLMResult, ep: Episode) -> float:
     """What the model saw: the sampled video, else the frame table, else the steps."""
@@ -99,13 +101,12 @@ class VLMCharacterizer:
         requests, order = [], []
         out: list[CharacterizeOutcome | None] = [None] * len(locs)
         for i, loc in enumerate(locs):
-            suite, task, ep = loc.key.split("/", 2)
-            ep_dir = self.run_dir / "stage1" / "episodes" / suite / task / ep
-            video = ep_dir / "video_agentview.mp4"
+            files = RunLayout(self.run_dir).stage1.episode_of_key(loc.key)
+            video = files.video(CAMERA)
             if not video.is_file():
                 out[i] = self._quarantine(loc, QuarantineReason.missing_video, f"{video}: no such file")
                 continue
-            frames = ep_dir / "frames.parquet"
+            frames = files.frames
             requests.append(VLMRequest(task="characterize", video=video, instruction=loc.instruction,
                                        fail_time_s=loc.fail_time_s, key=loc.key,
                                        frames_table=pq.read_table(frames) if frames.is_file() else None))

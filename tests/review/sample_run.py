@@ -1,6 +1,7 @@
 """A tiny synthetic run folder in the real stage-1/stage-2 layouts (no simulator needed).
 
-For tests, the load benchmark and trying the review page. Each episode gets a real H.264
+A test fixture (also used by benchmarks/review_load.py and benchmarks/bad_inputs.py); the
+paths come from `pipeline.layout.RunLayout`, like the stages'. Each episode gets a real H.264
 MP4 per camera (a moving square, so frame steps are visible), `frames.parquet`, a stage-2
 evidence Parquet in EVIDENCE_SCHEMA (with the metadata `pipeline.evidence` writes; columns
 this sample does not model are neutral), and a Localization JSON;
@@ -17,6 +18,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from pipeline.atomic import write_json, write_with
+from pipeline.layout import RunLayout, episode_key
 from pipeline.records import (EVIDENCE_SCHEMA, FRAME_SCHEMA, EventKind, Localization, Phases, QuarantineEntry,
                               QuarantineReason, SimEvent)
 
@@ -91,28 +93,28 @@ def _evidence(path: Path, steps: int, hz: int, fail_step: int) -> None:
 
 def build(run_dir: str | Path, n_episodes: int = 3, n_quarantined: int = 1, steps: int = 60, hz: int = 20,
           fps: int = 10, wrist: bool = True, video_size: int = 64) -> list[str]:
-    run_dir = Path(run_dir)
+    layout = RunLayout(Path(run_dir))
     keys = []
     for i in range(n_episodes + n_quarantined):
         ep = f"scripted-i{i:02d}-s0"
-        key = f"{SUITE}/{TASK}/{ep}"
+        key = episode_key(SUITE, TASK, ep)
         keys.append(key)
-        ep_dir = run_dir / "stage1" / "episodes" / SUITE / TASK / ep
+        files = layout.stage1.episode_of_key(key)
         n_frames = steps * fps // hz + 1
         frames = pa.table({"frame": pa.array(range(n_frames), pa.int32()),
                            "step": pa.array([f * hz // fps for f in range(n_frames)], pa.int32()),
                            "time_s": pa.array([f / fps for f in range(n_frames)], pa.float64())}, schema=FRAME_SCHEMA)
-        write_with(ep_dir / "frames.parquet", lambda p, tb=frames: pq.write_table(tb, p))
-        write_video(ep_dir / "video_agentview.mp4", n_frames, fps, video_size)
+        write_with(files.frames, lambda p, tb=frames: pq.write_table(tb, p))
+        write_video(files.video("agentview"), n_frames, fps, video_size)
         if wrist:
-            write_video(ep_dir / "video_robot0_eye_in_hand.mp4", n_frames, fps, video_size, hue=90)
+            write_video(files.video("robot0_eye_in_hand"), n_frames, fps, video_size, hue=90)
         fail_step = steps // 2 + 2 * i
-        _evidence(run_dir / "stage2" / "evidence" / SUITE / TASK / f"{ep}.parquet", steps, hz, fail_step)
+        _evidence(layout.stage2.evidence_of_key(key), steps, hz, fail_step)
         if i >= n_episodes:
             q = QuarantineEntry(key=key, stage="stage2", source="openai", reason=QuarantineReason.no_json,
                                 detail="the answer held no JSON object", raw_text="I think it fails around there.",
                                 model="Qwen/Qwen3.5-27B", prompt_name="localize.v1.zh", prompt_hash="ab12cd34")
-            write_json(run_dir / "stage2" / "quarantine" / SUITE / TASK / f"{ep}.json", q.model_dump(mode="json"))
+            write_json(layout.stage2.abs(layout.stage2.quarantine_for_key(key)), q.model_dump(mode="json"))
             continue
         loc = Localization(
             key=key, suite=SUITE, task=TASK, episode_id=ep, instruction=INSTRUCTION, source="simstate",
@@ -123,5 +125,5 @@ def build(run_dir: str | Path, n_episodes: int = 3, n_quarantined: int = 1, step
             events=[SimEvent(step=fail_step, time_s=fail_step / hz, kind=EventKind.object_toppled, object="akita_black_bowl_1",
                              detail="tilted 80 degrees")],
         )
-        write_json(run_dir / "stage2" / "localizations" / SUITE / TASK / f"{ep}.json", loc.model_dump(mode="json"))
+        write_json(layout.stage2.localization_of_key(key), loc.model_dump(mode="json"))
     return keys
