@@ -9,7 +9,7 @@ CONFIG ?= configs/smoke.yaml
 # real-simulator tests run in parallel, one worker per core
 PYTEST_WORKERS ?= 2
 
-.PHONY: setup setup-test demo test stage1 stage2 stage3 review-status review-serve review-export bench-review release verify reproduce export-lerobot eval tasks bench clean
+.PHONY: setup setup-test demo test stage1 stage2 stage3 review-status review-serve review-export bench-review release verify reproduce demos export-lerobot eval tasks bench clean
 
 # setup is idempotent: the stamp re-runs it only when its inputs change
 $(VENV)/.setup-stamp: pyproject.toml requirements/sim.txt scripts/setup.sh
@@ -61,6 +61,9 @@ verify: setup
 
 reproduce: setup
 	$(RECOVER) reproduce --config $(CONFIG)
+
+demos: setup
+	$(RECOVER) demos --config $(CONFIG)
 
 export-lerobot: setup
 	$(RECOVER) export-lerobot --config $(CONFIG)

@@ -10,7 +10,12 @@ JSON) to benchmarks/results/.
 
     .venv/bin/python benchmarks/scripted_success.py \\
         [--suites libero_spatial libero_object libero_goal] [--init-states 0 1 2] \\
-        [--tasks-per-suite N] [--workers 2] [--config configs/default.yaml] [--seed 0]
+        [--tasks-per-suite N] [--workers 2] [--config configs/default.yaml] [--seed 0] \\
+        [--expert plain|recovery] [--tasks 3 7]
+
+`--expert recovery` measures the closed-loop recovery expert
+(`pipeline.policies.scripted.recovery`) at zero noise only (it has no noise setting); its
+episodes also record the expert's give-up reason.
 """
 
 from __future__ import annotations
@@ -30,16 +35,21 @@ REPO = Path(__file__).resolve().parents[1]
 OUT = REPO / "benchmarks" / "results"
 
 
-def run_unit(suite: str, index: int, init_states: list[int], scripted: dict, seed: int) -> list[dict]:
+def run_unit(suite: str, index: int, init_states: list[int], scripted: dict, seed: int,
+             expert: str = "plain") -> list[dict]:
     """All episodes of one task at one noise setting, in one environment."""
     from pipeline.config import ScriptedPolicyConfig
     from pipeline.policies.scripted import make_scripted_policy
+    from pipeline.policies.scripted.recovery import make_recovery_expert
     from pipeline.rollout import run_episode
     from pipeline.sim import build_env, tasks
 
     task = tasks([suite])[index]
     env = build_env(task)
-    policy = make_scripted_policy(ScriptedPolicyConfig.model_validate(scripted))
+    if expert == "recovery":
+        policy = make_recovery_expert(env, task)
+    else:
+        policy = make_scripted_policy(ScriptedPolicyConfig.model_validate(scripted))
     noise = scripted["noise"]
     rows = []
     try:
@@ -61,6 +71,7 @@ def run_unit(suite: str, index: int, init_states: list[int], scripted: dict, see
                     "wall_s": round(time.perf_counter() - t0, 2),
                     "unmet": [list(c) for c, ok in env.goal_conjuncts() if not ok],
                     "events": policy.events,
+                    "give_up": str(policy.reason_after(res.success) or "") if expert == "recovery" else "",
                 }
             )
     finally:
@@ -90,9 +101,10 @@ def markdown(summary: list[dict], note: str) -> str:
     head = "| suite | tasks | episodes (each noise) | success, zero noise | success, default noise | mean steps of successes (zero / default) |"
     lines = [head, "|---|---|---|---|---|---|"]
     for s in summary:
+        noisy = f"{s['default_success']:.0%}" if s["default_episodes"] else "-"  # none: recovery expert
         lines.append(
             f"| {s['suite']} | {s['tasks']} | {s['zero_episodes']} | {s['zero_success']:.0%} | "
-            f"{s['default_success']:.0%} | {s['zero_steps']:.0f} / {s['default_steps']:.0f} |"
+            f"{noisy} | {s['zero_steps']:.0f} / {s['default_steps']:.0f} |"
         )
     return "\n".join(lines) + f"\n\n{note}\n"
 
@@ -106,8 +118,12 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--config", default=str(REPO / "configs" / "default.yaml"))
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--out", default=str(OUT / "scripted_success"))
+    ap.add_argument("--out", default=None, help="default benchmarks/results/scripted_success[_recovery]")
+    ap.add_argument("--expert", choices=["plain", "recovery"], default="plain")
+    ap.add_argument("--tasks", nargs="+", type=int, default=None, help="only these task indices")
     args = ap.parse_args()
+    if args.out is None:
+        args.out = str(OUT / ("scripted_success" if args.expert == "plain" else "scripted_success_recovery"))
 
     from pipeline.config import load_config
     from pipeline.sim import tasks
@@ -118,9 +134,11 @@ def main() -> None:
     units = []
     for suite in args.suites:
         chosen = tasks([suite])[:: args.task_stride][: args.tasks_per_suite]
+        if args.tasks is not None:
+            chosen = [t for t in chosen if t.index in args.tasks]
         for t in chosen:
-            for levels in (zero, scripted):
-                units.append((suite, t.index, args.init_states, levels, args.seed))
+            for levels in (zero, scripted) if args.expert == "plain" else (zero,):
+                units.append((suite, t.index, args.init_states, levels, args.seed, args.expert))
     n_eps = len(units) * len(args.init_states)
     rows: list[dict] = []
     t0 = time.perf_counter()
@@ -134,7 +152,7 @@ def main() -> None:
             progress.update(bar, completed=len(rows), description=f"episodes (success {ok}/{len(rows)})")
     wall = time.perf_counter() - t0
     summary = summarise(rows)
-    table = Table(title="scripted expert: success per suite")
+    table = Table(title=f"scripted expert ({args.expert}): success per suite")
     for col in ("suite", "tasks", "episodes", "zero noise", "default noise", "mean steps (0 / default)"):
         table.add_column(col)
     for s in summary:
@@ -150,7 +168,12 @@ def main() -> None:
     )
     kinds = Counter(e.split(":")[0] for r in rows if r["noisy"] for e in r["events"])
     fails = sum(1 for r in rows if r["noisy"] and not r["success"])
-    note += f"\nWith the configured noise: {fails} failed episodes; expert-observed events {dict(kinds)}."
+    if args.expert == "plain":
+        note += f"\nWith the configured noise: {fails} failed episodes; expert-observed events {dict(kinds)}."
+    else:
+        reasons = Counter(r["give_up"] for r in rows if not r["success"])
+        failed = [f"{r['suite']}/{r['task']}@{r['init']}" for r in rows if not r["success"]]
+        note = f"Recovery expert (zero noise). {note}\nFailures by reason {dict(reasons)}: {failed}."
     md = markdown(summary, note)
     print(md)
     out = Path(args.out)

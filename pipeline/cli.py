@@ -108,10 +108,19 @@ def reproduce(config: Path = CONFIG) -> None:
     raise typer.Exit(int(code or 0))
 
 
+@app.command()
+def demos(config: Path = CONFIG, dry_run: bool = DRY) -> None:
+    """Record recovery demonstrations: recovery-expert rollouts from every released scene."""
+    _call("pipeline.release.recovery_demos:run", _load(config, dry_run))
+
+
 @app.command("export-lerobot")
-def export_lerobot(config: Path = CONFIG, out: Path = typer.Option(None, help="output folder")) -> None:
-    """Export rollouts and pre-failure histories in the LeRobot v2.1 layout."""
-    _call("pipeline.release.lerobot_export:run", _load(config), out)
+def export_lerobot(config: Path = CONFIG, out: Path = typer.Option(None, help="output folder"),
+                   dataset: list[str] = typer.Option(None, "--dataset", "-d",
+                                                     help="rollouts | pre_failure_histories | recoveries (default: all)")
+                   ) -> None:
+    """Export rollouts, pre-failure histories and recovery demos in the LeRobot v2.1 layout."""
+    _call("pipeline.release.lerobot_export:run", _load(config), out, dataset or None)
 
 
 @app.command("eval")

@@ -148,7 +148,8 @@ class OpenpiPolicyConfig(_Strict):
 
 
 class PolicyConfig(_Strict):
-    kind: Literal["scripted", "openpi"] = "scripted"
+    # recovery: the zero-noise recovery expert (a reference for eval; it takes no settings)
+    kind: Literal["scripted", "openpi", "recovery"] = "scripted"
     name: str | None = None  # recorded with each episode; defaults to kind
     scripted: ScriptedPolicyConfig = ScriptedPolicyConfig()
     openpi: OpenpiPolicyConfig = OpenpiPolicyConfig()
@@ -272,8 +273,16 @@ class Stage3Config(_Strict):
 
 class ReleaseConfig(_Strict):
     output_dir: Path | None = None  # default: <run.output_dir>/release
-    certify_tries: int = Field(default=2, ge=0)  # scripted-expert tries per scene; 0 = skip
+    certify_tries: int = Field(default=2, ge=0)  # expert tries per scene; 0 = skip
     certify_horizon: int = Field(default=400, ge=1)
+    # which zero-noise expert certifies: the recovery expert, or the plain stage-1 expert
+    certify_expert: Literal["recovery", "plain"] = "recovery"
+    # recovery demonstrations (`recover demos`): successful recovery-expert rollouts per
+    # released scene, at most `recovery_demo_tries` tries per scene, each seeded with this
+    # much variation of approach and speed (0 = the certificate's expert), horizon certify_horizon
+    recovery_demos: int = Field(default=3, ge=0)
+    recovery_demo_tries: int = Field(default=8, ge=1)
+    recovery_demo_variation: float = Field(default=0.5, ge=0.0, le=1.0)
     settle_check_steps: int = Field(default=5, ge=1)
     settle_threshold_m: float = Field(default=0.005, gt=0)
     # LeRobot v2.1 export (`recover export-lerobot`); default folder <run.output_dir>/lerobot
@@ -283,7 +292,8 @@ class ReleaseConfig(_Strict):
 
 
 class EvalConfig(_Strict):
-    policies: list[PolicyConfig] = Field(default_factory=lambda: [PolicyConfig()])
+    # default: the clean scripted expert and the recovery expert, the two reference rows
+    policies: list[PolicyConfig] = Field(default_factory=lambda: [PolicyConfig(), PolicyConfig(kind="recovery")])
     trials_per_condition: int = Field(default=5, ge=1)
     gripper_conditions: list[Literal["open", "closed"]] = Field(default_factory=lambda: ["open", "closed"])
     max_offset_m: float = Field(default=0.02, ge=0.0)

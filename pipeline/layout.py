@@ -406,6 +406,31 @@ class EvalLayout:
 
 
 @dataclass(frozen=True)
+class RecoveriesLayout:
+    """Recovery demonstrations (`recover demos`): training data, outside the checksummed release."""
+
+    root: Path  # <run>/recoveries
+
+    DEMOS = "demos.parquet"
+    SCENES = "scenes.jsonl"
+
+    @property
+    def demos(self) -> Path:
+        return self.root / self.DEMOS
+
+    @property
+    def scenes_log(self) -> Path:
+        return self.root / self.SCENES
+
+    def scene_dir(self, key: str, step: int) -> Path:
+        """The demos of one released scene (`demo_<k>/` inside, stage-1 episode files each)."""
+        return self.root / Stage1Layout.episode_rel(key) / scene_stem(step)
+
+    def error(self, unit: str) -> Path:
+        return self.root / "errors" / f"{unit}.txt"
+
+
+@dataclass(frozen=True)
 class RunLayout:
     """A run folder. `release_root` is `release.output_dir` when the config sets one."""
 
@@ -442,6 +467,10 @@ class RunLayout:
 
     def bench(self, localizer: str) -> Path:
         return self.root / "bench" / f"localize_{localizer}"
+
+    @property
+    def recoveries(self) -> RecoveriesLayout:
+        return RecoveriesLayout(self.root / "recoveries")
 
     @property
     def lerobot(self) -> Path:

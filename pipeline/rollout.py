@@ -57,8 +57,10 @@ def run_episode(
     stop_on_success: bool = True,
     on_step: Callable[[StepInfo], None] | None = None,
     context: dict | None = None,
+    stop: Callable[[], bool] | None = None,
 ) -> EpisodeResult:
-    """Roll `policy` out from the env's current state (call `env.reset_to` first)."""
+    """Roll `policy` out from the env's current state (call `env.reset_to` first).
+    `stop`, asked after every step, ends the episode early (an expert that gave up)."""
     chunk: np.ndarray = np.empty((0, ACTION_DIM))
     used = 0
     first_success = None
@@ -80,4 +82,6 @@ def run_episode(
             first_success = step
             if stop_on_success:
                 break
+        if stop is not None and stop():
+            break
     return EpisodeResult(steps=step, success=first_success is not None, first_success_step=first_success)

@@ -116,6 +116,7 @@ class MetricRow(Record):
     level: Level | None = None
     category: Category | None = None
     policy: str
+    policy_kind: str | None = None  # the report marks the experts as reference rows
     chunk_size: int
     gripper: GripperCondition
     rd_phase: RDPhase | None = None

@@ -81,12 +81,31 @@ def compute(rows: list[MetricRow], ecfg: EvalConfig) -> dict:
     return out
 
 
+# how the summary names a policy kind; the privileged-state experts are reference rows
+KIND_LABEL = {"scripted": "scripted expert (reference)", "recovery": "recovery expert (reference)"}
+
+
+def summary_table(rows: list[MetricRow], data: dict) -> str:
+    """RSR per policy x level, one row per policy: the experts sit beside the evaluated policies."""
+    main = M.select(rows, mode="scene", chunk_size=data["chunk_size"])
+    lvls = _levels(main)
+    body = []
+    for pol in data["policies"]:
+        sel = M.select(main, policy=pol)
+        kinds = sorted({r.policy_kind or "" for r in sel} - {""})
+        kind = ", ".join(KIND_LABEL.get(k, k) for k in kinds) or "—"
+        body.append([f"`{pol}`", kind] + [_cell(sel, level=lv) for lv in lvls] + [_cell(sel)])
+    return _table(["policy", "kind"] + [lv or "unlabeled" for lv in lvls] + ["all"], body)
+
+
 def markdown(rows: list[MetricRow], ecfg: EvalConfig, data: dict, header: str = "") -> str:
     chunk = data["chunk_size"]
     suites = _ordered({r.suite for r in rows}, SUITES)
     parts = ["# Recovery evaluation\n\n", header, "\n",
              f"Rates in %, trials in parentheses; — = no trials in that subset. Chunk size {chunk} unless noted; "
-             f"RD epsilon {ecfg.epsilon:g}; RC uses the population std of task rates.\n"]
+             f"RD epsilon {ecfg.epsilon:g}; RC uses the population std of task rates.\n",
+             "\n## RSR per policy × level\n\nThe experts read privileged simulator state: they are references "
+             "(what a competent recovering policy scores), not contestants.\n\n", summary_table(rows, data)]
     for pol, res in data["policies"].items():
         main = M.select(rows, policy=pol, chunk_size=chunk)
         lvls = _levels(main)

@@ -1,7 +1,8 @@
 """Build the configured policy: `make_policy(PolicyConfig) -> Policy`.
 
 Imports each policy kind lazily, so a state-only run never loads the openpi client and an
-openpi run never loads the scripted planner.
+openpi run never loads the scripted planner. `recovery` is the zero-noise recovery
+expert (a reference policy for `recover eval`; stage 1 generates failures with `scripted`).
 """
 
 from __future__ import annotations
@@ -16,6 +17,10 @@ def make_policy(cfg: PolicyConfig) -> Policy:
         from pipeline.policies.scripted import make_scripted_policy
 
         return make_scripted_policy(cfg.scripted, name=cfg.name)
+    if cfg.kind == "recovery":
+        from pipeline.policies.scripted.recovery import RecoveryExpert
+
+        return RecoveryExpert(variation=0.0, name=cfg.name or "recovery")
     if cfg.kind == "openpi":
         from pipeline.policies.openpi_policy import OpenpiPolicy
 

@@ -109,12 +109,13 @@ def build(cfg: Config, console: Console | None = None) -> list[ScenarioRow]:
 
     refs = [SceneRef(r.suite, r.task, r.instruction, out / r.bddl_path, out / r.state_path,
                      f"{r.bddl_sha256[:16]}-{r.state_sha256[:16]}") for r in rows]
-    certs = certify_all(refs, cfg, out / BUILD_DIR / "certificates")
+    certs = certify_all(refs, cfg, out / BUILD_DIR / "certificates", cfg.release.certify_expert)
     for i, ref in enumerate(refs):
         c = certs.get(ref.cache_key)
         if c is not None:
             rows[i] = rows[i].model_copy(update={"certified": c.certified, "certify_tries": c.tries,
-                                                 "certify_successes": c.successes})
+                                                 "certify_successes": c.successes,
+                                                 "certify_reason": c.reason})
 
     write_manifest(out / MANIFEST_NAME, rows)
     write_figure(rows, out / FIGURE)

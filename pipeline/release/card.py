@@ -75,6 +75,25 @@ def write_figure(rows: list[ScenarioRow], path: Path) -> None:
     plt.close(fig)
 
 
+EXPERT_TEXT = {
+    "recovery": "The recovery expert (zero noise: it first restores the plan's preconditions, then runs\n"
+                "the task, and gives up with a reason when it cannot)",
+    "plain": "The plain scripted expert (zero noise, the stage-1 generator without its noise)",
+}
+
+
+def _uncertified(rows: list[ScenarioRow]) -> str:
+    """Why scenes are not certified: counts per reason, then each scene."""
+    bad = [r for r in rows if r.certified is False]
+    if not bad:
+        return ""
+    reasons = Counter(r.certify_reason or "unknown" for r in bad)
+    scenes = [[f"`{r.suite}/{r.task}/{r.episode_id}@{r.step}`", r.level, r.category, r.certify_reason or "unknown"]
+              for r in bad]
+    return ("\n" + _table(["reason", "scenes"], [[k, n] for k, n in sorted(reasons.items())]) + "\n\n"
+            + _table(["scene", "level", "category", "reason"], scenes) + "\n")
+
+
 def render_card(rows: list[ScenarioRow], cfg: Config, prompt_hashes: dict[str, list[str]], reviewers: int) -> str:
     suites = sorted({r.suite for r in rows})
     by_sl = Counter((r.suite, r.level) for r in rows)
@@ -123,10 +142,11 @@ send a few close commands (or open ones) before the policy acts, as `recover eva
 
 ## Recoverability certificate
 
-The clean scripted expert was run from each scene up to {cfg.release.certify_tries} times
-(horizon {cfg.release.certify_horizon} steps); a success certifies the scene recoverable.
-Not certified is not a rejection. Certified: {certified} of {attempted} attempted.
-
+{EXPERT_TEXT[cfg.release.certify_expert]} was run from each scene up to
+{cfg.release.certify_tries} times (horizon {cfg.release.certify_horizon} steps); a success
+certifies the scene recoverable. Not certified is not a rejection; the column
+`certify_reason` of `scenarios.parquet` says why. Certified: {certified} of {attempted} attempted.
+{_uncertified(rows)}
 ## How it was made
 
 - failure-generator policies: {", ".join(sorted({r.policy for r in rows})) or "(none)"}

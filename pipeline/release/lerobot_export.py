@@ -1,10 +1,13 @@
 """`recover export-lerobot`: rollouts and pre-failure histories as LeRobot v2.1 datasets.
 
 Inputs: stage 1 (`episodes.parquet`, each episode's `states.npy` + `steps.parquet`) and the
-release manifest (`scenarios.parquet`, for the histories). Outputs under `out` (default
-`<run>/lerobot/`): `rollouts/` (stage 1 episodes: all or failures only, per config) and
-`pre_failure_histories/` (each released scene's episode up to its failure step), each a
-LeRobot v2.1 dataset (`pipeline.release.lerobot_format`). Frames are rendered from the
+release manifest (`scenarios.parquet`, for the histories), and the recovery demos
+(`<run>/recoveries/demos.parquet`, `recover demos`). Outputs under `out` (default
+`<run>/lerobot/`): `rollouts/` (stage 1 episodes: all or failures only, per config),
+`pre_failure_histories/` (each released scene's episode up to its failure step) and
+`recoveries/` (the recovery demos, rendered in their scene's own BDDL model; task = the
+original instruction; episodes.jsonl also names each demo's scene id, level and
+category), each a LeRobot v2.1 dataset (`pipeline.release.lerobot_format`). Frames are rendered from the
 logged states at 20 Hz (every control step), third-person and wrist cameras, right side
 up; state = eef position, eef axis-angle, the two gripper finger positions (8-D, as in
 LIBERO's LeRobot datasets); action = the 7-D command. Resumable: an episode's files are
@@ -14,7 +17,7 @@ written before its done-marker (`<out>/_work/<dataset>/_done`); meta files come 
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -28,6 +31,8 @@ from pipeline.errors import ConfigError
 from pipeline.layout import EpisodeFiles, RunLayout, episode_key
 from pipeline.records import read_episodes
 from pipeline.release import lerobot_format as fmt
+from pipeline.release.manifest import MANIFEST_NAME
+from pipeline.release.scene_physics import scene_task
 from pipeline.sim import EnvCache, SimEnv, get_task
 from pipeline.sim.rotations import mat_to_quat
 
@@ -40,6 +45,8 @@ class ExportEpisode:
     instruction: str
     folder: Path  # stage 1 episode folder
     length: int  # frames to export (states[:length], actions[:length])
+    bddl: Path | None = None  # the scene's own BDDL (recovery demos); None: the task's
+    meta: dict = field(default_factory=dict)  # extra episodes.jsonl fields
 
 
 def axis_angle(rot: np.ndarray) -> np.ndarray:
@@ -104,6 +111,24 @@ def history_episodes(cfg: Config, manifest: Path) -> list[ExportEpisode]:
     return sorted(out, key=lambda x: x.key)
 
 
+def recovery_episodes(cfg: Config, release: Path) -> list[ExportEpisode]:
+    from pipeline.release.manifest import read_manifest
+    from pipeline.release.recovery_demos import DEMOS_NAME, read_demos, recoveries_dir, scene_id
+
+    root = recoveries_dir(cfg)
+    if not (root / DEMOS_NAME).is_file() or not (release / MANIFEST_NAME).is_file():
+        return []
+    bddl = {scene_id(r): release / r.bddl_path for r in read_manifest(release / MANIFEST_NAME)}
+    out = []
+    for d in read_demos(root / DEMOS_NAME):
+        if d.scene_id not in bddl:  # a demo of a scene no longer released
+            continue
+        out.append(ExportEpisode(f"{d.scene_id}/demo_{d.demo_index}", d.suite, d.task, d.instruction, root / d.path,
+                                 d.steps, bddl[d.scene_id],
+                                 {"scene_id": d.scene_id, "level": d.level, "category": d.category}))
+    return sorted(out, key=lambda x: x.key)
+
+
 def export_episode(env: SimEnv, ep: ExportEpisode, i: int, start: int, task_index: int, root: Path,
                    size: int) -> dict:
     """Render and write episode `i`; return its episodes.jsonl/episodes_stats.jsonl entry."""
@@ -116,7 +141,7 @@ def export_episode(env: SimEnv, ep: ExportEpisode, i: int, start: int, task_inde
     for key, f in frames.items():
         write_video(root / fmt.video_path(i, key), f)
     return {"episode_index": i, "tasks": [ep.instruction], "length": ep.length, "source": ep.key,
-            "stats": fmt.episode_stats(table, frames)}
+            "meta": ep.meta, "stats": fmt.episode_stats(table, frames)}
 
 
 def export_dataset(episodes: list[ExportEpisode], root: Path, work: Path, size: int, envs: EnvCache,
@@ -129,7 +154,8 @@ def export_dataset(episodes: list[ExportEpisode], root: Path, work: Path, size: 
     order = sorted(enumerate(episodes), key=lambda x: (x[1].suite, x[1].task, x[0]))
     for i, ep in order:
         if not done.is_done(f"{i:06d}"):
-            env = envs.get(get_task(ep.suite, ep.task))
+            env = envs.get(get_task(ep.suite, ep.task) if ep.bddl is None else
+                           scene_task(ep.suite, ep.task, ep.instruction, ep.bddl))
             meta = export_episode(env, ep, i, int(starts[i]), tasks.index(ep.instruction), root, size)
             write_json(work / f"{i:06d}.json", meta)
             done.mark_done(f"{i:06d}")
@@ -139,17 +165,29 @@ def export_dataset(episodes: list[ExportEpisode], root: Path, work: Path, size: 
     return int(starts[-1])
 
 
-def run(cfg: Config, out: Path | None = None) -> Path:
+DATASETS = ("rollouts", "pre_failure_histories", "recoveries")
+
+
+def run(cfg: Config, out: Path | None = None, only: list[str] | None = None) -> Path:
+    """Export every dataset, or those named in `only`."""
     layout = RunLayout.of(cfg)
     out = Path(out or cfg.release.lerobot_dir or layout.lerobot)
     size = cfg.release.lerobot_image_size
     if size % 2:
         raise ConfigError(f"release.lerobot_image_size must be even for yuv420p video, got {size}")
-    datasets = {"rollouts": rollout_episodes(cfg),
-                "pre_failure_histories": history_episodes(cfg, layout.release.manifest)}
+    bad = sorted(set(only or []) - set(DATASETS))
+    if bad:
+        raise ConfigError(f"export-lerobot: unknown dataset(s) {bad}; choose from {list(DATASETS)}")
+    sources = {"rollouts": lambda: rollout_episodes(cfg),
+               "pre_failure_histories": lambda: history_episodes(cfg, layout.release.manifest),
+               "recoveries": lambda: recovery_episodes(cfg, layout.release.root)}
+    datasets = {name: sources[name]() for name in DATASETS if not only or name in only}
     console = Console()
     with Progress(console=console, transient=True) as progress, EnvCache(capacity=1) as envs:
         for name, episodes in datasets.items():
+            if name == "recoveries" and not episodes:
+                console.print("[yellow]recoveries[/yellow]: no recovery demos (run `recover demos` first); skipped")
+                continue
             frames = export_dataset(episodes, out / name, out / "_work" / name, size, envs, progress)
             console.print(f"[green]{name}[/green]: {len(episodes)} episode(s), {frames} frames -> {out / name}")
     return out

@@ -142,7 +142,9 @@ def _jsonl(rows: list[dict]) -> str:
 
 
 def write_meta(root: Path, episodes: list[dict], tasks: list[str], size: int, robot_type: str = "panda") -> None:
-    """`episodes`: dicts with episode_index, tasks, length, stats (sorted by index)."""
+    """`episodes`: dicts with episode_index, tasks, length, stats (sorted by index) and optional
+    `meta` (extra episodes.jsonl fields, e.g. a recovery demo's scene id; LeRobot's converter
+    carries them into its episodes table)."""
     total_frames = sum(e["length"] for e in episodes)
     info = {
         "codebase_version": CODEBASE_VERSION, "robot_type": robot_type,
@@ -155,7 +157,8 @@ def write_meta(root: Path, episodes: list[dict], tasks: list[str], size: int, ro
     write_text(root / "meta" / "info.json", json.dumps(info, indent=4) + "\n")
     write_text(root / "meta" / "tasks.jsonl", _jsonl([{"task_index": i, "task": t} for i, t in enumerate(tasks)]))
     write_text(root / "meta" / "episodes.jsonl", _jsonl(
-        [{"episode_index": e["episode_index"], "tasks": e["tasks"], "length": e["length"]} for e in episodes]))
+        [{"episode_index": e["episode_index"], "tasks": e["tasks"], "length": e["length"], **e.get("meta", {})}
+         for e in episodes]))
     write_text(root / "meta" / "stats.json", json.dumps(aggregate_stats([e["stats"] for e in episodes]), indent=4) + "\n")
     write_text(root / "meta" / "episodes_stats.jsonl", _jsonl(
         [{"episode_index": e["episode_index"], "stats": e["stats"]} for e in episodes]))

@@ -54,6 +54,9 @@ class ScenarioRow(BaseModel):
     certified: bool | None = None  # None: not attempted (certify_tries = 0)
     certify_tries: int = 0
     certify_successes: int = 0
+    # why a scene is not certified: the recovery expert's give-up reason, `timeout` or
+    # `goal_not_reached`; None when certified or not attempted
+    certify_reason: str | None = None
 
     def files(self) -> list[tuple[str, str]]:
         """(relative path, sha256) of every released file of this scene."""
@@ -63,6 +66,9 @@ class ScenarioRow(BaseModel):
 
 
 SCENARIO_SCHEMA = arrow_schema(ScenarioRow, metadata={**SCHEMA_METADATA, "name": "libero-recover scenarios"})
+
+# columns a release built before them lacks; such a manifest still reads (they are None)
+ADDED_LATER = {"certify_reason"}
 
 
 def sha256_file(path: str | Path) -> str:
@@ -94,11 +100,11 @@ def read_manifest(path: str | Path) -> list[ScenarioRow]:
         table = pq.read_table(path)
     except (OSError, pa.ArrowInvalid) as e:
         raise ValueError(f"{path}: not a readable Parquet manifest: {e}") from None
-    missing = [f.name for f in SCENARIO_SCHEMA if f.name not in table.column_names]
+    missing = [f.name for f in SCENARIO_SCHEMA if f.name not in table.column_names and f.name not in ADDED_LATER]
     if missing:
         raise ValueError(f"{path}: manifest lacks column(s) {missing}")
     out = []
-    for i, rec in enumerate(table.select([f.name for f in SCENARIO_SCHEMA]).to_pylist()):
+    for i, rec in enumerate(table.select([f.name for f in SCENARIO_SCHEMA if f.name in table.column_names]).to_pylist()):
         try:
             out.append(ScenarioRow.model_validate(rec))
         except Exception as e:

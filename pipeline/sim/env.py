@@ -187,6 +187,10 @@ class SimEnv:
         d = self.env.sim.data
         return np.array(d.body_xpos[bid]), np.array(d.body_xquat[bid])
 
+    def object_com(self, name: str) -> np.ndarray:
+        """World centre of mass of an object (its body and the bodies below it)."""
+        return np.array(self.env.sim.data.subtree_com[self.env.obj_body_id[name]])
+
     def object_poses(self) -> dict[str, tuple[np.ndarray, np.ndarray]]:
         return {n: self.object_pose(n) for n in self.object_names}
 
@@ -255,9 +259,9 @@ class SimEnv:
             out.append(d.geom_xpos[g] + local @ rot.T)
         return np.concatenate(out) if out else np.empty((0, 3))
 
-    def ray_down(self, xy: np.ndarray, z_from: float, z_to: float) -> float | None:
+    def ray_down(self, xy: np.ndarray, z_from: float, z_to: float, ignore: str | None = None) -> float | None:
         """Height of the first non-robot collision surface straight below (xy, z_from), or
-        None when nothing lies above `z_to`."""
+        None when nothing lies above `z_to`; `ignore` names an object to see through too."""
         import mujoco
 
         m = self.env.sim.model._model
@@ -269,7 +273,7 @@ class SimEnv:
             dist = mujoco.mj_ray(m, d, np.array([xy[0], xy[1], z]), np.array([0.0, 0.0, -1.0]), groups, 1, -1, geom)
             if dist < 0 or z - dist < z_to:
                 return None
-            if self._owner[m.geom_bodyid[geom[0]]] != "robot":
+            if self._owner[m.geom_bodyid[geom[0]]] not in ("robot", ignore):
                 return z - dist
             z = z - dist - 1e-4  # passed through the robot's own geometry: look further down
         return None
@@ -288,6 +292,29 @@ class SimEnv:
             if int(m.body_parentid[b]) in bodies:
                 bodies.add(b)
         return self._geom_boxes(self._collision_geoms(bodies))
+
+    def joint_part_axes(self, joint: str) -> np.ndarray:
+        """(k, 3, 3) world rotations of the same geoms as `joint_part_boxes` (columns: the
+        geom's local axes), so a planner can tell a bar's long side at any joint angle."""
+        m = self.env.sim.model._model
+        d = self.env.sim.data._data
+        root = int(m.jnt_bodyid[m.joint(joint).id])
+        bodies = {root}
+        for b in range(root + 1, m.nbody):
+            if int(m.body_parentid[b]) in bodies:
+                bodies.add(b)
+        geoms = self._collision_geoms(bodies)
+        return np.array([d.geom_xmat[g].reshape(3, 3) for g in geoms]).reshape(len(geoms), 3, 3)
+
+    def joint_part_half_sizes(self, joint: str) -> np.ndarray:
+        """(k, 3) local half sizes (of the bounding box) of the same geoms."""
+        m = self.env.sim.model._model
+        root = int(m.jnt_bodyid[m.joint(joint).id])
+        bodies = {root}
+        for b in range(root + 1, m.nbody):
+            if int(m.body_parentid[b]) in bodies:
+                bodies.add(b)
+        return np.array([m.geom_aabb[g, 3:] for g in self._collision_geoms(bodies)]).reshape(-1, 3)
 
     def joint_frame(self, joint: str) -> dict:
         """A joint's world `anchor` (3,), world `axis` (3,), `qpos`, `range` (2,) and

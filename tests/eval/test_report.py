@@ -50,3 +50,15 @@ def test_compute_separates_policies():
     rows = [row(True, policy="a"), row(False, policy="b")]
     data = compute(rows, EvalConfig())
     assert data["policies"]["a"]["rsr"] == 1.0 and data["policies"]["b"]["rsr"] == 0.0
+
+
+def test_the_summary_puts_the_recovery_expert_as_a_reference_row_beside_the_plain_expert(tmp_path):
+    rows = [row(w, policy="scripted") .model_copy(update={"policy_kind": "scripted"}) for w in (True, False, False, False)]
+    rows += [row(w, policy="recovery", level="L3") .model_copy(update={"policy_kind": "recovery"}) for w in (True, True, True, False)]
+    rows += [row(False, policy="pi0") .model_copy(update={"policy_kind": "openpi"})]
+    write_report(rows, EvalConfig(), tmp_path)
+    md = (tmp_path / "report.md").read_text()
+    assert "| policy | kind | L1 | L2 | L3 | L4 | all |" in md
+    assert "| `scripted` | scripted expert (reference) | 25.0 (4) | — | — | — | 25.0 (4) |" in md
+    assert "| `recovery` | recovery expert (reference) | — | — | 75.0 (4) | — | 75.0 (4) |" in md
+    assert "| `pi0` | openpi | 0.0 (1) |" in md

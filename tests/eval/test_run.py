@@ -19,7 +19,9 @@ def _config(tmp_path: Path, fixture_run, **eval_overrides) -> Path:
     raw = {
         "run": {"name": "evaltest", "output_dir": str(tmp_path / "run"), "seed": 0},
         "executor": {"kind": "inline"},  # the patched policy factory lives in this process
-        "eval": {"scenes_dir": str(fixture_run.scenes), "stage1_dir": str(fixture_run.stage1),
+        # the plain expert only (the default adds the recovery expert: see the reference test)
+        "eval": {"policies": [{"kind": "scripted"}],
+                 "scenes_dir": str(fixture_run.scenes), "stage1_dir": str(fixture_run.stage1),
                  "trials_per_condition": 2, "horizon": 6, "gripper_settle_steps": 20} | eval_overrides,
     }
     path = tmp_path / "eval.yaml"
@@ -112,3 +114,19 @@ def test_recover_eval_runs_the_scripted_policy_on_two_workers(tmp_path, fixture_
     assert all(r.init_eef_drift_m < 0.01 for r in rows)
     report = (out / "report.md").read_text()
     assert "## Policy `scripted`" in report and "100.0 (2)" in report
+
+
+@pytest.mark.sim
+def test_the_default_eval_reports_the_recovery_expert_as_a_reference_row_beside_the_plain_expert(tmp_path, fixture_run):
+    raw = yaml.safe_load(_config(tmp_path, fixture_run, rd=False, trials_per_condition=1, horizon=300,
+                                 gripper_conditions=["closed"]).read_text())
+    del raw["eval"]["policies"]  # the default: both experts
+    path = tmp_path / "default.yaml"
+    path.write_text(yaml.safe_dump(raw))
+    out = eval_run.run(load_config(path))
+    rows = read_episodes(out / "episodes.parquet")
+    assert sorted((r.policy, r.policy_kind) for r in rows) == [("recovery", "recovery"), ("scripted", "scripted")]
+    assert all(r.success for r in rows if r.policy == "recovery")  # it recovers from a closed empty gripper
+    report = (out / "report.md").read_text()
+    assert "| `scripted` | scripted expert (reference) |" in report
+    assert "| `recovery` | recovery expert (reference) |" in report and "## Policy `recovery`" in report

@@ -100,6 +100,9 @@ def main(src: Path, work: Path, indices: list[int]) -> dict:
         "video_keys": image_keys,
         "tasks": ds.meta.tasks.index.tolist(),
         "episode_lengths": [int(x) for x in np.asarray(ds.meta.episodes["length"])],
+        # our extra episodes.jsonl fields (recovery demos), as LeRobot's converter carried them over
+        "episode_meta": {k: list(ds.meta.episodes[k]) for k in ("scene_id", "level", "category")
+                         if k in ds.meta.episodes.column_names},
         "frames": [frame_summary(ds[i], image_keys) for i in indices],
     }
 

@@ -20,6 +20,9 @@ MAX_SPAN = 0.068  # widest object (along the closing axis) grasped whole
 RIM_INSET = 0.012  # grasp point inside the outer rim edge
 RIM_DEPTH = 0.02  # grip site below the rim top
 FINGER_REACH = 0.047  # open fingertip centre from the grip site
+LONG_M = 0.12  # horizontal length beyond which a whole-object grasp goes to the centre of mass
+TALL_M = 0.11  # objects taller than this may be carried by a handle
+HANDLE_THIN_M, HANDLE_OUT_M = 0.016, 0.055  # a handle part: thinner than this, this far out
 YAWS = np.linspace(-np.pi / 2, np.pi / 2, 12, endpoint=False)
 
 
@@ -34,13 +37,14 @@ def closing_axis(yaw: float) -> np.ndarray:
     return np.array([-np.sin(yaw), np.cos(yaw), 0.0])
 
 
-def _blocked(scene: Scene, pos: np.ndarray, yaw: float, top: float) -> float:
+def _blocked(scene: Scene, pos: np.ndarray, yaw: float, top: float, skip_tips: bool = False) -> float:
     """How far (m) anything sticks up into the hand's way when the grip site is at `pos`:
-    under both fingertips and under the palm's ends (about 6 cm above the tips)."""
+    under both fingertips (unless `skip_tips`) and under the palm's ends (about 6 cm above
+    the tips)."""
     ax = closing_axis(yaw)
     side = np.array([-ax[1], ax[0], 0.0])
     tip_z = pos[2] - 0.012
-    probes = [(pos + s * ax * FINGER_REACH, tip_z) for s in (-1, 1)]
+    probes = [] if skip_tips else [(pos + s * ax * FINGER_REACH, tip_z) for s in (-1, 1)]
     # the hand's collision box reaches ~0.10 m along the closing axis, from ~5 cm above the site
     probes += [
         (pos + s * ax * r + t * side * 0.03, pos[2] + 0.05) for s in (-1, 1) for t in (-1, 1) for r in (0.05, 0.1)
@@ -55,9 +59,35 @@ def _blocked(scene: Scene, pos: np.ndarray, yaw: float, top: float) -> float:
     return worst
 
 
-def plan_grasp(scene: Scene, obj: str, dest: np.ndarray | None = None) -> Grasp:
+def handle_grasp(scene: Scene, obj: str) -> Grasp | None:
+    """A tall object with a thin handle sticking out of its body (a moka pot): grasp the
+    handle across its thin side, at mid-height. Its top edge (what a rim grasp finds) slips."""
+    box = scene.box(obj)
+    if box.size[2] < TALL_M:
+        return None
+    com = scene.env.object_com(obj)
+    boxes = scene.env.object_boxes(obj)
+    size = boxes[:, 1] - boxes[:, 0]
+    centre = (boxes[:, 0] + boxes[:, 1]) / 2
+    out = np.linalg.norm(centre[:, :2] - com[:2], axis=1)
+    thin = (size[:, :2].min(axis=1) < HANDLE_THIN_M) & (out > HANDLE_OUT_M)
+    if thin.sum() < 2:
+        return None
+    far = int(np.argmax(np.where(thin, out, -1.0)))
+    side = centre[far, :2] - com[:2]
+    parts = boxes[thin & ((centre[:, :2] - com[:2]) @ side > 0)]
+    lo, hi = parts[:, 0].min(axis=0), parts[:, 1].max(axis=0)
+    thin_axis = int(np.argmin((hi - lo)[:2]))  # fingers close along it
+    yaw = np.pi / 2 if thin_axis == 0 else 0.0
+    pos = (lo + hi) / 2
+    return Grasp(pos=pos, yaw=float(yaw), rim=False)
+
+
+def plan_grasp(scene: Scene, obj: str, dest: np.ndarray | None = None, choice: int = 0) -> Grasp:
     """`dest` (x, y, support top) is where the object's body goes next: the hand must fit
-    there too, so rim sides that would put the hand into a wall at the target lose."""
+    there too, so rim sides that would put the hand into a wall at the target lose.
+    `choice` k > 0 takes the k-th best candidate instead of the best (a retry after a
+    failed grasp tries another yaw or rim side, not the same one again)."""
     box = scene.box(obj)
     corners = scene.env.object_corners(obj)
     centre = box.centre
@@ -65,17 +95,32 @@ def plan_grasp(scene: Scene, obj: str, dest: np.ndarray | None = None) -> Grasp:
     floor = box.lo[2] + TABLE_MARGIN
     # whole-object grasp: narrowest closing direction that fits
     widths = [(float(np.ptp(corners[:, :2] @ closing_axis(y)[:2])), y) for y in YAWS]
-    fitting = [(w + 0.02 * abs(y), y) for w, y in widths if w < MAX_SPAN]
-    if fitting:
-        yaw = min(fitting)[1]
+    fitting = []
+    for w, yaw in widths:
+        if w >= MAX_SPAN:
+            continue
         mid = corners[:, :2] @ closing_axis(yaw)[:2]
         z = box.lo[2] + (min(max(0.5 * h, 0.015), h - 0.02) if h > 0.03 else 0.5 * h)
         pos = np.array([centre[0], centre[1], max(z, floor)])
         # centre between the extreme faces along the closing axis
         pos[:2] += closing_axis(yaw)[:2] * ((mid.max() + mid.min()) / 2 - centre[:2] @ closing_axis(yaw)[:2])
-        return Grasp(pos=pos, yaw=float(yaw), rim=False)
+        # a long object lying on its side (a toppled bottle): grasp it at its centre of
+        # mass along its length, or it pivots out of the fingers when lifted
+        along = np.array([closing_axis(yaw)[1], -closing_axis(yaw)[0]])
+        if float(np.ptp(corners[:, :2] @ along)) > LONG_M:
+            com = scene.env.object_com(obj)[:2]
+            pos[:2] += along * ((com - pos[:2]) @ along)
+        # a neighbour under the palm's ends (it reaches ~10 cm along the closing axis)
+        # would stop the descent: such yaws lose
+        block = _blocked(scene, pos, yaw, box.hi[2], skip_tips=True)
+        fitting.append((w + 0.02 * abs(yaw) + 10 * block, len(fitting), Grasp(pos=pos, yaw=float(yaw), rim=False)))
+    if fitting:
+        return sorted(fitting, key=lambda f: f[:2])[choice % len(fitting)][2]
+    handle = handle_grasp(scene, obj)
+    if handle is not None and choice % 2 == 0:
+        return handle
     # rim grasp: radial direction whose outer finger lands clear
-    best = None
+    ranked = []
     for theta in np.linspace(-np.pi, np.pi, 16, endpoint=False):
         u = np.array([np.cos(theta), np.sin(theta), 0.0])
         reach = float(np.max((corners - centre) @ u))
@@ -90,6 +135,6 @@ def plan_grasp(scene: Scene, obj: str, dest: np.ndarray | None = None) -> Grasp:
             there[2] = p[2] - box.lo[2] + dest[2] + 0.015
             block += _blocked(scene, there, yaw, there[2])
         score = block * 10 + 0.01 * abs(yaw)
-        if best is None or score < best[0]:
-            best = (score, Grasp(pos=p, yaw=float(yaw), rim=True))
-    return best[1]
+        ranked.append((score, len(ranked), Grasp(pos=p, yaw=float(yaw), rim=True)))
+    ranked.sort(key=lambda r: r[:2])
+    return ranked[choice % len(ranked)][2]

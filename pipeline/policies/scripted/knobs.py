@@ -14,6 +14,18 @@ from pipeline.policies.scripted.primitives import Grip
 from pipeline.policies.scripted.skills import Ctx, Plan, free_hand, travel
 
 
+def bar_yaw(env, joint: str, geom: int) -> float:
+    """Hand yaw that closes the fingers across the grip bar: the bar's long horizontal side
+    (from the geom's live orientation, so any stove rotation and knob angle) is where the
+    fingers must not close along."""
+    rot = env.joint_part_axes(joint)[geom]
+    half = env.joint_part_half_sizes(joint)[geom]
+    horizontal = [i for i in range(3) if abs(rot[2, i]) < 0.7]
+    long_axis = rot[:, max(horizontal, key=lambda i: half[i])]
+    a = float(np.arctan2(long_axis[1], long_axis[0]))
+    return (a + np.pi / 2) % np.pi - np.pi / 2
+
+
 def turn_knob(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:
     """Grasp the knob's grip bar (the part's highest box) and twist the wrist about its axis."""
     s, env = ctx.scene, ctx.scene.env
@@ -29,14 +41,14 @@ def turn_knob(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:
         spin = float(np.sign(fr["axis"][2]))
         goal_q = 0.9 if on else fr["range"][0] - 0.05
         boxes = env.joint_part_boxes(joint)
-        grip = boxes[int(np.argmax(boxes[:, 1, 2]))]
+        top = int(np.argmax(boxes[:, 1, 2]))
+        grip = boxes[top]
         offset = ctx.noise.grasp_offset() * [0.5, 0.5, 1.0]
         ctx.begin("turn_on" if on else "turn_off", conjunct, conjunct[1])
         ctx.note(grasp_offset=offset)
         pos = (grip[0] + grip[1]) / 2 + offset
         pos[2] = grip[1, 2] - 0.015
-        # LIBERO's stove: the grip bar is thin along world x at q = 0, so close along x
-        yaw = (np.pi / 2 + spin * q + np.pi / 2) % np.pi - np.pi / 2
+        yaw = bar_yaw(env, joint, top)
         ctx.yaw_hold = yaw
         yield from free_hand(ctx)
         hover = pos + [0, 0, 0.08]

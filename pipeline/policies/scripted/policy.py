@@ -52,11 +52,7 @@ class ScriptedPolicy:
         if env is None:
             raise ValueError(f"policy {self.name}: the scripted expert needs privileged state (obs.sim)")
         if self._plan is None:
-            noise = Noise(self.cfg.noise, episode_rng(self._seed, self._task_id or env.task.task_id))
-            scene = Scene(env)
-            truth = TruthLog(scene, self.cfg.noise.action_noise, noise.speed)
-            self._ctx = Ctx(scene=scene, noise=noise, max_attempts=self.cfg.max_attempts, truth=truth)
-            self._plan = plan_episode(self._ctx)
+            self._ctx, self._plan = self._start(env)
         if self._last is not None:
             prim, n, step0 = self._last
             prim.steps += max(0, min(obs.step - step0, n))
@@ -69,6 +65,14 @@ class ScriptedPolicy:
         chunk = self._ctx.noise.actions(chunk)
         self._last = (self._prim, len(chunk), obs.step)
         return chunk
+
+    def _start(self, env) -> tuple[Ctx, Plan]:
+        """The episode's context and plan, made on the first `act` from the live scene."""
+        noise = Noise(self.cfg.noise, episode_rng(self._seed, self._task_id or env.task.task_id))
+        scene = Scene(env)
+        truth = TruthLog(scene, self.cfg.noise.action_noise, noise.speed)
+        ctx = Ctx(scene=scene, noise=noise, max_attempts=self.cfg.max_attempts, truth=truth)
+        return ctx, plan_episode(ctx)
 
     @property
     def phase(self) -> str:

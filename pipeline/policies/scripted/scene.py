@@ -89,6 +89,11 @@ class Scene:
         # every LIBERO arena's table top sits at the lowest object's resting height
         if not hasattr(self, "_table"):
             lows = [self.env.object_aabb(n)[0][2] for n in self.env.object_names]
+            try:  # an object that fell off the table must not lower it (a failure scene)
+                top = float(self.env.object_boxes("table")[:, 1, 2].max())
+                lows = [z for z in lows if z > top - 0.05] or [top]
+            except (KeyError, ValueError):
+                pass
             self._table = float(min(lows)) if lows else 0.9
         return self._table
 

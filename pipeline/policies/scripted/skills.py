@@ -77,14 +77,16 @@ def free_hand(ctx: Ctx) -> Plan:
         yield ctx.move(eef + [0, 0, 0.06], tol=0.02, label="back_off")
 
 
-def grasp(ctx: Ctx, obj: str, dest: np.ndarray | None = None) -> Plan:
+def grasp(ctx: Ctx, obj: str, dest: np.ndarray | None = None, choice: int = 0, hover_m: float = 0.08) -> Plan:
+    """Reach above the object, descend, close, lift. `choice` / `hover_m`: another grasp
+    candidate and a higher hover (the recovery expert's retries)."""
     s = ctx.scene
-    g = plan_grasp(s, obj, dest)
+    g = plan_grasp(s, obj, dest, choice)
     offset = ctx.noise.grasp_offset()
     ctx.note(grasp_offset=offset)
     pos = g.pos + offset
     lift_z = s.path_clearance(s.eef(), pos, 0.06, {obj}) + HAND_CLEARANCE
-    hover = pos + [0, 0, 0.08]
+    hover = pos + [0, 0, hover_m]
     yield from travel(ctx, hover, g.yaw, -1.0, lift_z)
     yield ctx.move(hover, yaw=g.yaw, tol=0.012, label="hover")
     t = ctx.noise.timing()
@@ -97,8 +99,53 @@ def grasp(ctx: Ctx, obj: str, dest: np.ndarray | None = None) -> Plan:
 
 
 def place_xy(ctx: Ctx, obj: str, target: str) -> np.ndarray:
-    """Where the object's body should end up (xy): on an object's body or a region's centre."""
-    return ctx.scene.pos(target)[:2].copy()
+    """Where the object's body should end up (xy): on an object's body or a region's centre;
+    in a drawer, the point nearest its centre with open sky above the object's footprint
+    (an open bottom drawer lies partly under the drawers above it)."""
+    s = ctx.scene
+    xy = s.pos(target)[:2].copy()
+    if not s.env.is_region(target):
+        return xy
+    r = s.env.region(target)
+    drawer = bool(r["joints"])
+    half = np.abs(r["mat"]) @ r["size"]
+    top = r["pos"][2] + half[2]
+    size = s.box(obj).size[:2]
+    rad = 0.5 * float(max(size)) + 0.01  # sky over the whole footprint (a bowl rim hits the face above)
+    # other objects already standing in the region (the second moka pot on a stove)
+    reach = 0.5 * float(max(size))  # objects within this of the region count
+    others = [s.box(o) for o in s.env.object_names if o != obj]
+    others = [b for b in others if np.all(b.hi[:2] > xy - half[:2] - reach) and np.all(b.lo[:2] < xy + half[:2] + reach)]
+    if s.env.region(target)["parent"] in s.env.object_names:
+        others = []  # a container object (a basket): things may share its middle
+    if not drawer and not others:
+        return xy
+    best = None
+    for fx in np.linspace(-1.0, 1.0, 11):
+        for fy in np.linspace(-1.0, 1.0, 11):
+            p = r["pos"][:2] + half[:2] * [fx, fy]
+            # overlap (m^2) of the footprint with objects already there: least wins
+            lo, hi = p - size / 2, p + size / 2
+            crowd = sum(float(np.prod(np.clip(np.minimum(hi, b.hi[:2]) - np.maximum(lo, b.lo[:2]), 0, None)))
+                        for b in others)
+            probes = [p + d for d in ([0, 0], [rad, 0], [-rad, 0], [0, rad], [0, -rad])]
+            if drawer and any((h := s.env.ray_down(q, top + 0.5, top, ignore=obj)) is not None and h > top for q in probes):
+                continue
+            d = 100 * crowd + float(np.linalg.norm(p - xy))
+            if best is None or d < best[0]:
+                best = (d, p)
+    return xy if best is None else best[1]
+
+
+def support_ceiling(env, target: str) -> float:
+    """Boxes whose top is at or above this height cannot support an object put `in`/`on`
+    `target`: for a region, a little above its top; for a region inside a drawer, its top
+    itself (the cabinet's own top sits just above the top drawer's region)."""
+    if not env.is_region(target):
+        return np.inf
+    r = env.region(target)
+    top = r["pos"][2] + float(np.abs(r["mat"] @ r["size"])[2])
+    return top if r["joints"] else top + 0.03
 
 
 def destination(ctx: Ctx, obj: str, target: str) -> np.ndarray:
@@ -107,15 +154,18 @@ def destination(ctx: Ctx, obj: str, target: str) -> np.ndarray:
     box = s.box(obj)
     dest = place_xy(ctx, obj, target)
     foot = dest + (box.centre[:2] - s.env.object_pose(obj)[0][:2])
-    below = np.inf
-    if s.env.is_region(target):
-        r = s.env.region(target)
-        below = r["pos"][2] + float(np.abs(r["mat"] @ r["size"])[2]) + 0.03
+    below = support_ceiling(s.env, target)
     radius = 0.6 * float(min(box.size[0], box.size[1])) / 2
     return np.array([dest[0], dest[1], s.support_top(foot, radius, {obj}, below=below)])
 
 
 def place(ctx: Ctx, obj: str, target: str) -> Plan:
+    yield from place_at(ctx, obj, place_xy(ctx, obj, target), support_ceiling(ctx.scene.env, target))
+
+
+def place_at(ctx: Ctx, obj: str, xy: np.ndarray, below: float = np.inf) -> Plan:
+    """Carry the held object so its body comes down at `xy` on whatever supports it there
+    (ignoring boxes whose top is at or above `below`), release, retreat."""
     s = ctx.scene
     env = s.env
     eef = s.eef()
@@ -125,12 +175,8 @@ def place(ctx: Ctx, obj: str, target: str) -> Plan:
     bottom = eef[2] - box.lo[2]  # grip site above the object's bottom
     radius = 0.6 * float(min(box.size[0], box.size[1])) / 2
     offset_xy = ctx.noise.place_offset()[:2]
-    dest = place_xy(ctx, obj, target) + offset_xy
+    dest = np.asarray(xy, dtype=float)[:2] + offset_xy
     foot = dest + (box.centre[:2] - body[:2])
-    below = np.inf
-    if env.is_region(target):
-        r = env.region(target)
-        below = r["pos"][2] + float(np.abs(r["mat"] @ r["size"])[2]) + 0.03
     support = s.support_top(foot, radius, {obj}, below=below)
     offset_z = abs(ctx.noise.place_offset()[2])
     ctx.note(place_offset=[offset_xy[0], offset_xy[1], offset_z])

@@ -1,0 +1,159 @@
+"""Reading a live scene for what blocks the plan: hopeless objects, an awkward arm, a wrong
+hold, objects in the way. Pure queries over `Scene`; nothing here moves the robot."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pipeline.policies.scripted.recovery.reasons import GiveUpReason
+from pipeline.policies.scripted.scene import Scene
+
+OFF_TABLE_M = 0.06  # a body this far below the table top has fallen off it
+REACH_M = 0.95  # horizontal reach from the robot base the arm can still grasp at
+JOINT_MARGIN = 0.15  # radians from a joint limit that count as an awkward pose
+SAFE_Z = 0.16  # grip site above the table top from which any approach may start
+# comfortable region of the grip site (x, y), relative to the robot base
+HOME_XY = np.array([0.45, 0.0])
+COMFORT_XY = np.array([[0.15, -0.45], [0.95, 0.45]])
+
+
+def robot_base(scene: Scene) -> np.ndarray:
+    sim = scene.env.env.sim
+    return np.array(sim.data.body_xpos[sim.model.body_name2id("robot0_base")])
+
+
+def moved_objects(scene: Scene) -> list[str]:
+    """Objects the goal moves (first argument of `on` / `in`)."""
+    return [c[1] for c in scene.env.goal if c[0] in ("on", "in") and c[1] in scene.env.object_names]
+
+
+def hopeless(scene: Scene, objects: list[str]) -> tuple[GiveUpReason, str] | None:
+    """A goal object fell off the table or lies beyond reach: the task cannot be finished."""
+    table = scene.table_height()
+    base = robot_base(scene)
+    for o in objects:  # off the table first: a fallen object is usually also far away
+        p = scene.env.object_pose(o)[0]
+        if scene.box(o).hi[2] < table - OFF_TABLE_M:
+            return GiveUpReason.OBJECT_OFF_TABLE, f"{o} at z {p[2]:.2f}, table top {table:.2f}"
+    for o in objects:
+        p = scene.env.object_pose(o)[0]
+        if float(np.linalg.norm(p[:2] - base[:2])) > REACH_M:
+            return GiveUpReason.UNREACHABLE, f"{o} {np.linalg.norm(p[:2] - base[:2]):.2f} m from the robot base"
+    return None
+
+
+def awkward_arm(scene: Scene) -> bool:
+    """An arm joint near its limit, the grip site outside the comfortable region, or the
+    hand tilted away from pointing down: approaches from here go wrong."""
+    sim = scene.env.env.sim
+    m = sim.model
+    for i in range(1, 8):
+        j = m.joint_name2id(f"robot0_joint{i}")
+        lo, hi = m.jnt_range[j]
+        q = sim.data.qpos[m.jnt_qposadr[j]]
+        if lo < hi and min(q - lo, hi - q) < JOINT_MARGIN:
+            return True
+    eef, rot = scene.env.eef_pose()
+    rel = eef[:2] - robot_base(scene)[:2]
+    if np.any(rel < COMFORT_XY[0]) or np.any(rel > COMFORT_XY[1]):
+        return True
+    return float(-rot[2, 2]) < np.cos(np.radians(25))  # grip axis more than 25 deg off vertical
+
+
+def arm_in_contact(scene: Scene, held: str | None) -> bool:
+    return any("robot" in pair and not (held and held in pair) for pair in scene.env.contacts())
+
+
+def low_hand(scene: Scene) -> bool:
+    return scene.eef()[2] < scene.table_height() + SAFE_Z
+
+
+def _overlap(a: np.ndarray, b: np.ndarray, pad: float = 0.0) -> bool:
+    return bool(np.all(a[0, :2] - pad <= b[1, :2]) and np.all(b[0, :2] - pad <= a[1, :2]))
+
+
+def blockers(scene: Scene, obj: str, dest: np.ndarray, keep: set[str]) -> list[str]:
+    """Movable objects in the way of moving `obj` to `dest` (x, y, support top): lying on
+    top of `obj`, or standing on the support in the footprint it needs there. `keep` (goal
+    objects, the target) are never moved aside."""
+    box = scene.box(obj)
+    half = box.size[:2] / 2
+    foot = np.array([[*(dest[:2] - half * 0.8), 0.0], [*(dest[:2] + half * 0.8), 0.0]])
+    on_top = np.array([box.lo, box.hi])
+    loose = {o for o in scene.env.object_names if o != obj and o not in keep}
+    # the support itself, without loose objects lying on it (`dest` may stand on them)
+    support = scene.support_top(dest[:2], 0.6 * float(min(half)), loose | {obj}, below=dest[2] + 0.005)
+    out = []
+    for o in sorted(loose):
+        b = scene.box(o)
+        ob = np.array([b.lo, b.hi])
+        if _overlap(ob, on_top) and b.lo[2] > box.hi[2] - 0.02:
+            out.append(o)
+        elif _overlap(ob, foot) and b.lo[2] > support - 0.04 and b.hi[2] > support + 0.005:
+            out.append(o)
+    return out
+
+
+def grasp_blockers(scene: Scene, obj: str, grasp, keep: set[str]) -> list[str]:
+    """Movable objects standing where the palm's ends go down when grasping `obj` with
+    `grasp` (the palm reaches ~10 cm either way along the closing axis, ~5 cm above the
+    grip site): the best grasp of a flat box next to a tall carton is such a case."""
+    from pipeline.policies.scripted.grasps import closing_axis
+
+    ax = closing_axis(grasp.yaw)
+    side = np.array([-ax[1], ax[0], 0.0])
+    points = [grasp.pos + sg * ax * r + t * side * 0.03 for sg in (-1, 1) for r in (0.05, 0.1) for t in (-1, 1)]
+    out = []
+    for o in scene.env.object_names:
+        if o == obj or o in keep:
+            continue
+        b = scene.box(o)
+        if b.hi[2] < grasp.pos[2] + 0.05:
+            continue
+        if any(np.all(b.lo[:2] - 0.005 <= p[:2]) and np.all(p[:2] <= b.hi[:2] + 0.005) for p in points):
+            out.append(o)
+    return out
+
+
+def drawer_sweep(scene: Scene, joint: str) -> np.ndarray | None:
+    """(2, 3) box the drawer of a slide `joint` covers from now until fully open, or None
+    for a hinge."""
+    fr = scene.env.joint_frame(joint)
+    if fr["kind"] != "slide":
+        return None
+    rng = fr["range"]
+    open_q = rng[0] if abs(rng[0]) > abs(rng[1]) else rng[1]
+    shift = fr["axis"] * (open_q - fr["qpos"])
+    boxes = scene.env.joint_part_boxes(joint)
+    lo, hi = boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0)
+    return np.array([np.minimum(lo, lo + shift), np.maximum(hi, hi + shift)])
+
+
+def under_sweep(scene: Scene, obj: str, sweep: np.ndarray, margin: float = 0.05) -> bool:
+    """The opened drawer would overhang `obj` (or the hand grasping it, `margin`)."""
+    b = scene.box(obj)
+    return _overlap(np.array([b.lo, b.hi]), sweep, pad=margin) and b.hi[2] < sweep[1, 2]
+
+
+def free_spot(scene: Scene, obj: str, avoid: list[np.ndarray], forbid: list[np.ndarray] = ()) -> np.ndarray | None:
+    """A table spot (xy) where `obj` can stand without touching anything, near the hand,
+    away from the points in `avoid` (goal targets), inside the comfortable region."""
+    box = scene.box(obj)
+    r = float(np.linalg.norm(box.size[:2])) / 2 + 0.03
+    table = scene.table_height()
+    base = robot_base(scene)[:2]
+    eef = scene.eef()[:2]
+    boxes = [b for _, b in scene.obstacle_boxes({obj}) if b[1, 2] > table + 0.005]
+    best = None
+    home = base + HOME_XY
+    for x in np.arange(0.42, 0.7, 0.03):  # in front of the robot: far or close spots are slow
+        for y in np.arange(-0.3, 0.301, 0.03):
+            xy = base + [x, y]
+            sq = np.array([[*(xy - r), 0.0], [*(xy + r), 0.0]])
+            if any(_overlap(b, sq) for b in boxes) or any(_overlap(f, sq, pad=0.05) for f in forbid):
+                continue
+            cost = float(np.linalg.norm(xy - eef)) + float(np.linalg.norm(xy - home))
+            cost += sum(max(0.0, 0.2 - float(np.linalg.norm(xy - a[:2]))) * 5 for a in avoid)
+            if best is None or cost < best[0]:
+                best = (cost, xy)
+    return None if best is None else best[1]

@@ -1,0 +1,66 @@
+"""The recovery expert as a `Policy`: the scripted expert's machinery (primitives, chunking,
+truth log) with the recovery planner instead of the plain one, zero noise unless asked
+for `variation`, and a `give_up_reason` when it stops short of the goal."""
+
+from __future__ import annotations
+
+from pipeline.config import ScriptedPolicyConfig
+from pipeline.policies.scripted.noise import episode_rng
+from pipeline.policies.scripted.policy import ScriptedPolicy
+from pipeline.policies.scripted.primitives import Move
+from pipeline.policies.scripted.recovery.planner import recover
+from pipeline.policies.scripted.recovery.reasons import GiveUp, GiveUpReason
+from pipeline.policies.scripted.recovery.variation import RetryNoise, variation_levels
+from pipeline.policies.scripted.scene import Scene
+from pipeline.policies.scripted.skills import Ctx, Plan
+from pipeline.policies.scripted.truth import TruthLog
+from pipeline.sim import TaskSpec
+
+
+class RecoveryExpert(ScriptedPolicy):
+    def __init__(self, variation: float = 0.0, budget_steps: int | None = None, name: str | None = None):
+        super().__init__(ScriptedPolicyConfig(noise=variation_levels(variation), max_attempts=1),
+                         name or "recovery-expert")
+        self.variation = float(variation)
+        self.budget_steps = budget_steps
+        self.give_up_reason: GiveUpReason | None = None
+        self.give_up_detail = ""
+        self._now = 0
+
+    def reset(self, task: TaskSpec, seed: int) -> None:
+        super().reset(task, seed)
+        self.give_up_reason = None
+        self.give_up_detail = ""
+        self._now = 0
+
+    def act(self, obs):
+        self._now = obs.step
+        return super().act(obs)
+
+    def _start(self, env) -> tuple[Ctx, Plan]:
+        noise = RetryNoise(self.cfg.noise, episode_rng(self._seed, self._task_id or env.task.task_id))
+        scene = Scene(env)
+        ctx = Ctx(scene=scene, noise=noise, max_attempts=1, truth=TruthLog(scene, 0.0, noise.speed))
+        return ctx, self._run(ctx)
+
+    def _run(self, ctx: Ctx) -> Plan:
+        try:
+            yield from recover(ctx, lambda: self._now, self.budget_steps)
+        except GiveUp as e:
+            self.give_up_reason, self.give_up_detail = e.reason, e.detail
+            ctx.events.append(f"give_up:{e.reason}")
+        s = ctx.scene
+        while True:  # done or given up: hold still
+            yield Move(target=s.eef(), gripper=-1.0 if s.holding_any() is None else 1.0, tol=-1.0,
+                       max_steps=10**9, yaw=ctx.yaw_hold, label="idle")
+
+    def reason_after(self, success: bool) -> GiveUpReason | None:
+        """The reason for an episode's outcome: None on success; the expert's own reason, or
+        `timeout` when the runner's horizon ended it first."""
+        if success:
+            return None
+        return self.give_up_reason or GiveUpReason.TIMEOUT
+
+    def params(self) -> dict:
+        return {"kind": "recovery", "variation": self.variation, "budget_steps": self.budget_steps,
+                **self.cfg.model_dump(mode="json")}

@@ -1,0 +1,22 @@
+"""Skill: one attempt at an articulated conjunct (open / close a drawer or door, turn a
+knob), re-opening or re-closing whatever a failure changed. Uses the plain expert's
+part skills with a single attempt; a retry differs by `RetryNoise`'s shift."""
+
+from __future__ import annotations
+
+from pipeline.policies.scripted import articulated, knobs
+from pipeline.policies.scripted.skills import Ctx, Plan
+
+
+def operate_once(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:
+    kind = conjunct[0]
+    saved, ctx.max_attempts = ctx.max_attempts, 1
+    try:
+        if kind == "open":
+            yield from articulated.open_part(ctx, conjunct)
+        elif kind == "close":
+            yield from articulated.close_part(ctx, conjunct)
+        else:
+            yield from knobs.turn_knob(ctx, conjunct)
+    finally:
+        ctx.max_attempts = saved

@@ -1,0 +1,30 @@
+"""Skill: one attempt at an `on` / `in` conjunct, chosen for the object's current pose.
+
+Attempt k > 0 grasps differently: the k-th best grasp candidate (another yaw or rim side,
+for side-lying bottles and mugs as for upright ones), approached from higher up, with the
+retry shift of `variation.RetryNoise`. The planner calls it again from the live state.
+"""
+
+from __future__ import annotations
+
+from pipeline.policies.scripted.skills import Ctx, Plan, destination, free_hand, grasp, place
+
+
+def pick_place_once(ctx: Ctx, conjunct: tuple[str, ...], attempt: int) -> Plan:
+    _, obj, target = conjunct
+    s = ctx.scene
+    ctx.begin("pick_place", conjunct, obj, target)
+    if s.holding_any() != obj:
+        yield from free_hand(ctx)
+        yield from grasp(ctx, obj, destination(ctx, obj, target), choice=attempt,
+                         hover_m=0.08 + 0.03 * min(attempt, 2))
+        if s.holding_any() != obj:
+            ctx.events.append(f"missed_grasp:{obj}")
+            if ctx.truth is not None:
+                ctx.truth.end_hand(obj, False)
+            return
+    yield from place(ctx, obj, target)
+    if ctx.truth is not None:
+        ctx.truth.end_hand(obj, s.satisfied(conjunct))
+    if not s.satisfied(conjunct) and s.holding_any() != obj:
+        ctx.events.append(f"misplaced:{obj}")

@@ -1,0 +1,121 @@
+"""The recovery expert's plan: restore the plan's preconditions, then do the next subgoal;
+replan from the live scene after every skill.
+
+Each round reads the scene and decides one thing:
+1. a goal object fell off the table or is out of reach -> give up with that reason;
+2. the hand holds an object the next subgoal does not use -> put it aside;
+3. the arm touches something or sits low / awkward -> back it out;
+4. the next unmet subgoal (goal order: open, knobs, pick-and-place, close; an implied open
+   before putting into a closed drawer) has something in its way -> move that aside;
+5. otherwise one attempt at the subgoal; attempt k of the same subgoal grasps differently.
+A subgoal that failed MAX_TRIES times, or a budget of steps spent, ends with a reason.
+"""
+
+from __future__ import annotations
+
+import os
+from collections import Counter
+from collections.abc import Callable
+
+from pipeline.policies.scripted import articulated
+from pipeline.policies.scripted.grasps import plan_grasp
+from pipeline.policies.scripted.planner import order_goal
+from pipeline.policies.scripted.recovery import checks
+from pipeline.policies.scripted.recovery.back_out import back_out
+from pipeline.policies.scripted.recovery.operate import operate_once
+from pipeline.policies.scripted.recovery.pick_place import pick_place_once
+from pipeline.policies.scripted.recovery.put_aside import put_aside
+from pipeline.policies.scripted.recovery.reasons import GiveUp, GiveUpReason
+from pipeline.policies.scripted.recovery.variation import RetryNoise
+from pipeline.policies.scripted.skills import Ctx, Plan, destination, free_hand
+
+MAX_TRIES = 4  # attempts per subgoal (each one different)
+MAX_ASIDE = 2
+FLAT_M = 0.04  # objects lower than this are grasped with the palm near the table  # times one obstruction is moved aside
+
+
+def _debug(*a) -> None:
+    if os.environ.get("RECOVERY_DEBUG"):
+        print("[recovery]", *a, flush=True)
+
+
+def next_subgoal(ctx: Ctx, steps: list[tuple[str, ...]], goal: list[tuple[str, ...]]) -> tuple[str, ...] | None:
+    """The first unmet step; a held goal object's own placement comes first."""
+    s = ctx.scene
+    todo = []
+    for c in steps:
+        if c in goal:
+            if not s.satisfied(c):
+                todo.append(c)
+        elif c[0] == "open" and articulated.is_closed_enough(s.env, c[1]):
+            # an implied open: only while something must still go in
+            if any(g[0] == "in" and not s.satisfied(g) and articulated.openable(s.env, g[2]) == c[1] for g in goal):
+                todo.append(c)
+    held = s.holding_any()
+    for c in todo:
+        if c[0] in ("on", "in") and c[1] == held:
+            return c
+    return todo[0] if todo else None
+
+
+def recover(ctx: Ctx, now: Callable[[], int], budget: int | None) -> Plan:
+    s = ctx.scene
+    goal = [tuple(c) for c in s.env.goal]
+    steps = order_goal(goal, lambda region: articulated.openable(s.env, region))
+    tries: Counter = Counter()
+    aside: Counter = Counter()
+    keep = {n for c in goal for n in c[1:]}  # never moved aside: goal objects, targets and
+    keep |= {s.env.region(n)["parent"] for n in list(keep) if s.env.is_region(n)}  # their owners
+    while not s.env.goal_satisfied():
+        if budget is not None and now() >= budget:
+            raise GiveUp(GiveUpReason.TIMEOUT, f"step budget {budget} spent")
+        sub = next_subgoal(ctx, steps, goal)
+        if sub is None:
+            raise GiveUp(GiveUpReason.NO_PLAN, "every subgoal holds but the goal does not")
+        movers = [c[1] for c in goal if c[0] in ("on", "in") and not s.satisfied(c) and c[1] in s.env.object_names]
+        hopeless = checks.hopeless(s, movers)
+        if hopeless is not None:
+            raise GiveUp(*hopeless)
+        held = s.holding_any()
+        if held is not None and not (sub[0] in ("on", "in") and sub[1] == held):
+            aside[held] += 1
+            if aside[held] > MAX_ASIDE + 1:
+                raise GiveUp(GiveUpReason.RETRIES_EXHAUSTED, f"could not put {held} aside")
+            yield from put_aside(ctx, held, aside[held] - 1)
+            continue
+        if held is None and not s.gripper_open():
+            yield from free_hand(ctx)
+        yield from back_out(ctx)
+        if sub[0] in ("on", "in") and held != sub[1]:
+            dest = destination(ctx, sub[1], sub[2])
+            in_way = checks.blockers(s, sub[1], dest, keep)
+            # whatever stands where the palm goes down: after a failed grasp, or at once for
+            # a flat object (the palm then comes down low, beside its neighbours)
+            if tries[sub] > 0 or s.box(sub[1]).size[2] < FLAT_M:
+                in_way += checks.grasp_blockers(s, sub[1], plan_grasp(s, sub[1], dest, tries[sub]), keep)
+            block = [b for b in in_way if aside[b] < MAX_ASIDE]
+            if block:
+                _debug("aside", block)
+                aside[block[0]] += 1
+                yield from put_aside(ctx, block[0], aside[block[0]] - 1)
+                continue
+        _debug("subgoal", sub, "try", tries[sub], "held", held)
+        if sub[0] == "open" and (joint := articulated.part_joint(s.env, sub[1])) is not None:
+            # an object the opened drawer would overhang cannot be grasped afterwards: first aside
+            sweep = checks.drawer_sweep(s, joint)
+            under = [m for m in movers if sweep is not None and checks.under_sweep(s, m, sweep) and aside[m] < MAX_ASIDE]
+            if under:
+                _debug("aside before opening", under)
+                aside[under[0]] += 1
+                yield from put_aside(ctx, under[0], aside[under[0]] - 1, forbid=[sweep])
+                continue
+        if tries[sub] >= MAX_TRIES:
+            raise GiveUp(GiveUpReason.RETRIES_EXHAUSTED, f"{' '.join(sub)} failed {MAX_TRIES} times")
+        if isinstance(ctx.noise, RetryNoise):
+            ctx.noise.attempt = tries[sub]
+        if sub[0] in ("on", "in"):
+            yield from pick_place_once(ctx, sub, tries[sub])
+        else:
+            yield from operate_once(ctx, sub)
+        if not s.satisfied(sub) or sub not in goal:
+            tries[sub] += 1

@@ -1,0 +1,37 @@
+"""Skill: put an object down where it blocks nothing (a wrongly held object, or an
+obstruction on the approach or placement path), then let go and rise."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pipeline.policies.scripted.recovery import checks
+from pipeline.policies.scripted.recovery.reasons import GiveUp, GiveUpReason
+from pipeline.policies.scripted.skills import Ctx, Plan, free_hand, grasp, place_at
+
+
+def goal_points(ctx: Ctx) -> list[np.ndarray]:
+    """Where the goal's objects and targets are: a set-aside object must keep clear of them."""
+    s = ctx.scene
+    pts = []
+    for c in s.env.goal:
+        for name in c[1:]:
+            try:
+                pts.append(s.pos(name))
+            except KeyError:
+                continue
+    return pts
+
+
+def put_aside(ctx: Ctx, obj: str, attempt: int = 0, forbid: list[np.ndarray] = ()) -> Plan:
+    """`forbid`: (2, 3) boxes the spot must keep clear of (e.g. a drawer's sweep)."""
+    s = ctx.scene
+    if s.holding_any() != obj:
+        yield from free_hand(ctx)
+        yield from grasp(ctx, obj, None, choice=attempt, hover_m=0.08 + 0.03 * min(attempt, 2))
+        if s.holding_any() != obj:
+            return
+    spot = checks.free_spot(s, obj, goal_points(ctx), forbid)
+    if spot is None:
+        raise GiveUp(GiveUpReason.NO_PLAN, f"no free spot on the table to put {obj} aside")
+    yield from place_at(ctx, obj, spot)

@@ -1,0 +1,270 @@
+"""`recover demos`: recovery demonstrations, successful recovery-expert rollouts from every released scene.
+
+Inputs: the release manifest (`<release>/scenarios.parquet`, its scene files) and
+`cfg.release` (`recovery_demos` per scene, `recovery_demo_tries`, `recovery_demo_variation`,
+`certify_horizon`), `cfg.stage1.video` for the videos.
+Outputs under `<run>/recoveries/` (`recoveries_dir`):
+    episodes/<suite>/<task>/<episode_id>/step_<NNNN>/demo_<k>/
+        states.npy, steps.parquet          as stage 1 writes them (`EpisodeRecorder`)
+        video_<camera>.mp4, frames.parquet as stage 1 renders them (its render process)
+    demos.parquet      one row per demo (`DemoRecord`: scene id, level, category, seed, ...)
+    scenes.jsonl       one line per scene: tries, demos, why the other tries failed
+    _done/<scene>.done the scene's line, written after all its demos' videos are back
+Try k of a scene runs the recovery expert with seed `demo_seed(run seed, scene id, k)` and
+the configured variation (approach and speed); a try that does not reach the goal is no
+demo: it is counted (with the expert's reason) and its files are not kept. Tries stop at
+`recovery_demos` successes or `recovery_demo_tries` tries. Resumable per scene; a scene
+whose environment or state fails is set aside with the reason and the rest goes on.
+Nothing in `recover eval` reads these: they are training data.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import shutil
+import time
+import traceback
+from collections import Counter
+from itertools import groupby
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+from pydantic import BaseModel, ConfigDict
+from rich.console import Console
+from rich.progress import Progress
+
+from pipeline import SCHEMA_VERSION
+from pipeline.atomic import Completions, write_text, write_with
+from pipeline.config import Config
+from pipeline.errors import FatalError
+from pipeline.layout import RecoveriesLayout, RunLayout, episode_key
+from pipeline.release.experts import attempt, recovery_expert
+from pipeline.release.manifest import MANIFEST_NAME, ScenarioRow, read_manifest
+from pipeline.release.scene_physics import restore_scene, scene_task
+from pipeline.sim import EnvCache
+from pipeline.stage1.recorder import EpisodeRecorder
+
+DEMOS_NAME = RecoveriesLayout.DEMOS
+
+
+def recoveries_dir(cfg: Config) -> Path:
+    return RunLayout.of(cfg).recoveries.root
+
+
+def scene_id(row: ScenarioRow) -> str:
+    """The eval's scene id (`pipeline.eval.scenes`): stable across copies of the release."""
+    return f"{row.suite}/{row.task}/{row.episode_id}/step_{row.step:04d}"
+
+
+def demo_seed(seed: int, scene: str, k: int) -> int:
+    digest = hashlib.sha256(f"recovery-demo/{seed}/{scene}/{k}".encode()).digest()
+    return int.from_bytes(digest[:4], "little") & 0x7FFFFFFF
+
+
+class DemoRecord(BaseModel):
+    model_config = ConfigDict(extra="forbid")
+
+    scene_id: str
+    suite: str
+    task: str
+    instruction: str
+    episode_id: str  # the failed stage-1 episode the scene was cut from
+    step: int  # the scene's step in it
+    level: str
+    category: str
+    demo_index: int  # k-th demo of the scene
+    try_index: int  # which try produced it (earlier tries failed)
+    seed: int
+    variation: float
+    steps: int
+    state_dim: int
+    path: str  # relative to the recoveries folder
+    videos: dict[str, str] = {}
+    video_fps: int | None = None
+    wall_time_s: float
+
+
+DEMO_SCHEMA = pa.schema(
+    [
+        pa.field("scene_id", pa.string(), nullable=False),
+        pa.field("suite", pa.string(), nullable=False),
+        pa.field("task", pa.string(), nullable=False),
+        pa.field("instruction", pa.string(), nullable=False),
+        pa.field("episode_id", pa.string(), nullable=False),
+        pa.field("step", pa.int32(), nullable=False),
+        pa.field("level", pa.string(), nullable=False),
+        pa.field("category", pa.string(), nullable=False),
+        pa.field("demo_index", pa.int32(), nullable=False),
+        pa.field("try_index", pa.int32(), nullable=False),
+        pa.field("seed", pa.int64(), nullable=False),
+        pa.field("variation", pa.float64(), nullable=False),
+        pa.field("steps", pa.int32(), nullable=False),
+        pa.field("state_dim", pa.int32(), nullable=False),
+        pa.field("path", pa.string(), nullable=False),
+        pa.field("videos", pa.map_(pa.string(), pa.string()), nullable=False),
+        pa.field("video_fps", pa.int32()),
+        pa.field("wall_time_s", pa.float64(), nullable=False),
+    ],
+    metadata={"schema_version": str(SCHEMA_VERSION), "name": "libero-recover recovery demonstrations"},
+)
+
+
+def write_demos(path: Path, demos: list[DemoRecord]) -> None:
+    demos = sorted(demos, key=lambda d: (d.scene_id, d.demo_index))
+    cols = {f.name: [getattr(d, f.name) for d in demos] for f in DEMO_SCHEMA}
+    cols["videos"] = [list(v.items()) for v in cols["videos"]]
+    table = pa.table(cols, schema=DEMO_SCHEMA)
+    write_with(path, lambda p: pq.write_table(table, p))
+
+
+def read_demos(path: Path) -> list[DemoRecord]:
+    """Demo records of `demos.parquet`; ValueError naming the file and row if it is not one."""
+    try:
+        rows = pq.read_table(path).to_pylist()
+    except (OSError, pa.ArrowInvalid) as e:
+        raise ValueError(f"{path}: not a readable demos table: {e}") from None
+    out = []
+    for i, r in enumerate(rows):
+        r["videos"] = dict(r["videos"] or [])
+        try:
+            out.append(DemoRecord.model_validate(r))
+        except Exception as e:
+            raise ValueError(f"{path}: row {i} invalid: {e}") from None
+    return out
+
+
+def _unit(row: ScenarioRow) -> str:
+    return scene_id(row).replace("/", "__")
+
+
+def _record_scene(env, row: ScenarioRow, state: np.ndarray, cfg: Config, root: Path, submit) -> dict:
+    """Run the tries of one scene; hand each demo to `submit(record, states)`; return its summary."""
+    rc = cfg.release
+    sid = scene_id(row)
+    base = RecoveriesLayout(root).scene_dir(episode_key(row.suite, row.task, row.episode_id), row.step)
+    if base.exists():  # leftovers of a scene killed before its marker
+        shutil.rmtree(base)
+    fails: Counter[str] = Counter()
+    demos = tries = 0
+    while demos < rc.recovery_demos and tries < rc.recovery_demo_tries:
+        seed = demo_seed(cfg.run.seed, sid, tries)
+        t0 = time.perf_counter()
+        restore_scene(env, state)
+        rec = EpisodeRecorder(env)
+        policy = recovery_expert(env, seed=seed, variation=rc.recovery_demo_variation)
+        out = attempt(env, state, policy, seed, rc.certify_horizon, cfg.stage1.rollout.chunk_size,
+                      on_step=rec.on_step, restore=False)
+        policy.close()
+        tries += 1
+        if not out.success:
+            fails[out.reason or "unknown"] += 1
+            continue
+        folder = base / f"demo_{demos}"
+        rec.write(folder)
+        record = DemoRecord(
+            scene_id=sid, suite=row.suite, task=row.task, instruction=row.instruction, episode_id=row.episode_id,
+            step=row.step, level=row.level, category=row.category, demo_index=demos, try_index=tries - 1,
+            seed=seed, variation=rc.recovery_demo_variation, steps=out.steps, state_dim=env.state_dim,
+            path=folder.relative_to(root).as_posix(), wall_time_s=round(time.perf_counter() - t0, 4))
+        submit(record, rec.states_array())
+        demos += 1
+    return {"scene_id": sid, "level": row.level, "category": row.category, "tries": tries, "demos": demos,
+            "failed": dict(sorted(fails.items()))}
+
+
+def run(cfg: Config, console: Console | None = None) -> Path:
+    from pipeline.release.build import release_dir
+    from pipeline.stage1.render_pool import RenderProcess
+
+    console = console or Console()
+    release = release_dir(cfg)
+    try:
+        rows = read_manifest(release / MANIFEST_NAME)
+    except FileNotFoundError:
+        raise FatalError(f"{release / MANIFEST_NAME}: no release to record demos from; run `recover release` first") from None
+    except ValueError as e:
+        raise FatalError(str(e)) from None
+    root = recoveries_dir(cfg)
+    done = Completions(root)
+    v = cfg.stage1.video
+    todo = [r for r in rows if not done.is_done(_unit(r))] if cfg.release.recovery_demos else []
+    renders = RenderProcess() if todo else None
+    waiting: dict[str, list] = {}  # scene unit -> [summary, outstanding tickets, records]
+    tickets: dict[str, tuple[str, DemoRecord]] = {}
+    problems: list[str] = []
+
+    def collect(wait: bool) -> None:
+        for ticket, videos, error in renders.results(wait) if renders is not None else []:
+            unit, record = tickets.pop(ticket)
+            entry = waiting.get(unit)
+            if entry is None:  # its scene failed after submitting; already set aside
+                continue
+            entry[1] -= 1
+            if error is None:
+                entry[2].append(record.model_copy(update={"videos": videos, "video_fps": v.fps}))
+            else:
+                entry[0]["render_error"] = error.strip().splitlines()[-1]
+            if entry[1] == 0 and entry[0] is not None:
+                finish(unit)
+
+    def finish(unit: str) -> None:
+        summary, _, records = waiting.pop(unit)
+        if "render_error" in summary:  # no marker: the scene is redone on rerun
+            problems.append(f"{unit}: {summary['render_error']}")
+            return
+        summary["records"] = [r.model_dump(mode="json") for r in sorted(records, key=lambda r: r.demo_index)]
+        done.mark_done(unit, summary)
+
+    todo.sort(key=lambda r: (r.suite, r.task, (release / r.bddl_path).read_bytes()))
+    try:
+        with Progress(console=console, transient=True) as bar, EnvCache(capacity=1) as envs:
+            job = bar.add_task("recovery demos", total=len(todo))
+            for row in todo:
+                unit = _unit(row)
+                try:
+                    env = envs.get(scene_task(row.suite, row.task, row.instruction, release / row.bddl_path))
+                    state = np.load(release / row.state_path, allow_pickle=False)
+                    if not renders.alive:  # fail what it held (those scenes are redone), take a fresh one
+                        collect(wait=False)
+                        renders.close()
+                        renders = RenderProcess()
+                    renders.prepare(env, v.resolution, v.quality)
+                    waiting[unit] = [None, 0, []]
+
+                    def submit(record: DemoRecord, states: np.ndarray, unit=unit, env=env) -> None:
+                        ticket = f"{unit}/{record.demo_index}"
+                        tickets[ticket] = (unit, record)
+                        waiting[unit][1] += 1
+                        renders.submit(ticket, env, states, root / record.path, list(v.cameras), v.fps,
+                                       v.resolution, v.quality)
+
+                    waiting[unit][0] = _record_scene(env, row, state, cfg, root, submit)
+                except Exception as e:  # one scene's failure must not cost the others
+                    waiting.pop(unit, None)
+                    problems.append(f"{scene_id(row)}: {type(e).__name__}: {e}")
+                    write_text(RecoveriesLayout(root).error(unit), traceback.format_exc())
+                else:
+                    if waiting[unit][1] == 0:
+                        finish(unit)
+                collect(wait=False)
+                bar.advance(job)
+            collect(wait=True)
+    finally:
+        if renders is not None:
+            renders.close()
+    summaries = [done.info(_unit(r)) for r in rows if done.is_done(_unit(r))]
+    demos = [DemoRecord.model_validate(d) for s in summaries for d in s.get("records", [])]
+    write_demos(RecoveriesLayout(root).demos, demos)
+    lines = [{k: s[k] for k in ("scene_id", "level", "category", "tries", "demos", "failed")} for s in summaries]
+    write_text(RecoveriesLayout(root).scenes_log, "".join(json.dumps(x, sort_keys=True) + "\n" for x in
+                                            sorted(lines, key=lambda x: x["scene_id"])))
+    tries = sum(x["tries"] for x in lines)
+    console.print(f"[green]{len(demos)} recovery demo(s)[/green] from {sum(x['demos'] > 0 for x in lines)} of "
+                  f"{len(rows)} scene(s); {tries - len(demos)} unsuccessful tr{'y' if tries - len(demos) == 1 else 'ies'}"
+                  f" not kept -> {root}")
+    for p in problems:
+        console.print(f"  [yellow]set aside[/yellow] {p}", highlight=False)
+    return root

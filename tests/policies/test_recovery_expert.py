@@ -1,0 +1,95 @@
+"""The recovery expert finishes from hand-made failure states in the real simulator, and
+stops with a reason when it cannot (a goal object off the table)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pipeline.policies.base import Policy
+from pipeline.policies.scripted.recovery import GiveUpReason, make_recovery_expert
+from pipeline.policies.scripted.recovery.variation import variation_levels
+from pipeline.policies.scripted.scene import Scene
+from pipeline.rollout import run_episode
+from pipeline.sim import build_env, tasks
+from tests.policies.failure_states import grasp_wrong, lying, set_joint, set_pose, start
+
+pytestmark = [pytest.mark.sim, pytest.mark.xdist_group("recovery_expert")]
+
+
+@pytest.fixture(scope="module")
+def bowl_on_plate():
+    task = tasks(["libero_goal"])[8]  # put the bowl on the plate
+    env = build_env(task)
+    yield task, env
+    env.close()
+
+
+def finish(env, task, horizon: int):
+    policy = make_recovery_expert(env, task, seed=0)
+    assert isinstance(policy, Policy)
+    result = run_episode(env, policy, horizon=horizon, chunk_size=8)
+    return result, policy
+
+
+def on_plate(env, obj: str) -> bool:
+    return tuple(sorted((obj, "plate_1"))) in env.contacts()
+
+
+def test_a_wrongly_held_object_is_put_aside_then_the_task_is_done(bowl_on_plate):
+    task, env = bowl_on_plate
+    start(env)
+    grasp_wrong(env, "cream_cheese_1")
+    assert Scene(env).holding_any() == "cream_cheese_1"
+    result, policy = finish(env, task, horizon=400)
+    assert result.success and policy.give_up_reason is None
+    assert not on_plate(env, "cream_cheese_1")
+
+
+def test_an_obstruction_on_the_placement_path_is_moved_aside_first(bowl_on_plate):
+    task, env = bowl_on_plate
+    start(env)
+    set_pose(env, "cream_cheese_1", env.object_pose("plate_1")[0] + [0, 0, 0.05])
+    assert on_plate(env, "cream_cheese_1")
+    result, policy = finish(env, task, horizon=400)
+    assert result.success and not on_plate(env, "cream_cheese_1")
+
+
+def test_a_goal_object_off_the_table_stops_with_object_off_table(bowl_on_plate):
+    task, env = bowl_on_plate
+    start(env)
+    set_pose(env, "akita_black_bowl_1", [0.0, 0.8, 0.3])  # beyond the table edge: it falls
+    result, policy = finish(env, task, horizon=40)
+    assert not result.success
+    assert policy.give_up_reason == GiveUpReason.OBJECT_OFF_TABLE
+    assert policy.reason_after(result.success) == GiveUpReason.OBJECT_OFF_TABLE
+
+
+def test_a_toppled_bottle_is_grasped_lying_and_placed():
+    task = tasks(["libero_goal"])[2]  # put the wine bottle on top of the cabinet
+    with build_env(task) as env:
+        start(env)
+        p = env.object_pose("wine_bottle_1")[0]
+        set_pose(env, "wine_bottle_1", p + [0, 0, 0.04], lying("y"), settle=30)
+        assert env.object_aabb("wine_bottle_1")[1][2] - env.object_aabb("wine_bottle_1")[0][2] < 0.08  # lying
+        result, policy = finish(env, task, horizon=520)
+        assert result.success
+
+
+def test_a_drawer_left_half_open_is_opened_the_rest_of_the_way():
+    task = tasks(["libero_goal"])[0]  # open the middle drawer of the cabinet
+    with build_env(task) as env:
+        start(env)
+        set_joint(env, "wooden_cabinet_1_middle_level", -0.06)
+        assert not env.object_state("wooden_cabinet_1_middle_region").is_open()
+        result, policy = finish(env, task, horizon=300)
+        assert result.success
+
+
+def test_variation_is_zero_noise_at_zero_and_bounded():
+    assert not any(variation_levels(0.0).model_dump().values())
+    levels = variation_levels(1.0)
+    assert levels.action_noise == 0 and levels.gripper_timing_steps == 0 and levels.speed_scale > 0
+    with pytest.raises(ValueError, match="variation"):
+        variation_levels(1.5)
+    assert np.isfinite(levels.grasp_offset_m)
