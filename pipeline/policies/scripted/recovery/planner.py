@@ -9,6 +9,7 @@ Each round reads the scene and decides one thing:
    before putting into a closed drawer) has something in its way -> move that aside;
 5. otherwise one attempt at the subgoal; attempt k of the same subgoal grasps differently.
 A subgoal that failed MAX_TRIES times, or a budget of steps spent, ends with a reason.
+`RECOVERY_DEBUG=1` in the environment prints each decision (for tuning; off by default).
 """
 
 from __future__ import annotations
