@@ -103,6 +103,9 @@ SCENARIO_SCHEMA = pa.schema(
         pa.field("certified", pa.bool_()),
         pa.field("certify_tries", pa.int32(), nullable=False),
         pa.field("certify_successes", pa.int32(), nullable=False),
+        # added by the recovery-expert certificates (why a scene is not certified); the one
+        # column not in the hand-written schema, declared nullable so older manifests still read
+        pa.field("certify_reason", pa.string()),
     ],
     metadata={"schema_version": str(SCHEMA_VERSION), "name": "libero-recover scenarios"},
 )
