@@ -94,6 +94,20 @@ def retry_event(r: Retry):
     return Event(kind="retry", unit=r.label, reason=r.reason, attempt=r.attempt)
 
 
+def retry_or_set_aside(report: RunReport, item: int, label: str, attempt: int, reason: str, max_retries: int,
+                       on_event: Callable[[Any], None] | None) -> SetAside | None:
+    """An item whose worker died: None when it is to run again (a retry, reported), else the
+    `SetAside` once its attempts are used up (one rule for every executor)."""
+    if attempt <= max_retries:
+        report.retried.append(Retry(item=item, label=label, attempt=attempt, reason=reason))
+        if on_event is not None:
+            on_event(retry_event(report.retried[-1]))
+        return None
+    aside = SetAside(item=item, label=label, attempts=attempt, reason=reason)
+    report.set_aside.append(aside)
+    return aside
+
+
 def die_with_parent() -> None:
     """Ask Linux to SIGKILL this process when its parent dies (no orphaned workers)."""
     try:

@@ -27,8 +27,8 @@ from dataclasses import dataclass
 from multiprocessing.connection import Connection, wait
 from typing import Any
 
-from pipeline.executors.base import (Executor, Retry, RunReport, SetAside, WorkFn, apply_worker_env, default_label,
-                                     die_with_parent, retry_event)
+from pipeline.executors.base import (Executor, RunReport, WorkFn, apply_worker_env, default_label, die_with_parent,
+                                     retry_or_set_aside)
 from pipeline.runner.context import WorkerContext
 
 _STOP = b""  # the caller's "no more items" message
@@ -168,14 +168,10 @@ class LocalExecutor(Executor):
             if i is None:
                 return
             reason = _death(w.proc)
-            if attempts[i] <= self.max_retries:
-                report.retried.append(Retry(item=i, label=label(i, items[i]), attempt=attempts[i], reason=reason))
-                if on_event is not None:
-                    on_event(retry_event(report.retried[-1]))
+            aside = retry_or_set_aside(report, i, label(i, items[i]), attempts[i], reason, self.max_retries, on_event)
+            if aside is None:
                 todo.appendleft(i)  # first in line: a poison item is settled early
             else:
-                aside = SetAside(item=i, label=label(i, items[i]), attempts=attempts[i], reason=reason)
-                report.set_aside.append(aside)
                 results[i] = aside
                 left -= 1
 

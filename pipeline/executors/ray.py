@@ -23,7 +23,7 @@ from collections.abc import Callable
 from typing import Any
 
 from pipeline.errors import FatalError
-from pipeline.executors.base import Executor, Retry, RunReport, SetAside, WorkFn, default_label, retry_event
+from pipeline.executors.base import Executor, RunReport, WorkFn, default_label, retry_or_set_aside
 
 
 class _Worker:
@@ -112,14 +112,12 @@ class RayExecutor(Executor):
 
             def lost(i: int, e: Exception) -> None:
                 reason = f"{type(e).__name__}: {(str(e).strip().splitlines() or [''])[0][:200]}"
-                if attempts[i] <= self.max_retries:
-                    report.retried.append(Retry(item=i, label=label(i, items[i]), attempt=attempts[i], reason=reason))
-                    if on_event is not None:
-                        on_event(retry_event(report.retried[-1]))
+                aside = retry_or_set_aside(report, i, label(i, items[i]), attempts[i], reason, self.max_retries,
+                                           on_event)
+                if aside is None:
                     todo.appendleft(i)  # first in line: a poison item is settled early
                 else:
-                    results[i] = SetAside(item=i, label=label(i, items[i]), attempts=attempts[i], reason=reason)
-                    report.set_aside.append(results[i])
+                    results[i] = aside
 
             for _ in range(min(self.workers, len(items))):
                 start()

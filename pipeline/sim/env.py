@@ -283,38 +283,31 @@ class SimEnv:
         boxes = self.object_boxes(name)
         return boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0)
 
-    def joint_part_boxes(self, joint: str) -> np.ndarray:
-        """World boxes of the collision geoms moved by a joint (its body and descendants)."""
+    def _joint_part_geoms(self, joint: str) -> list[int]:
+        """Collision geoms moved by a joint: its body and the bodies below it."""
         m = self.env.sim.model._model
         root = int(m.jnt_bodyid[m.joint(joint).id])
         bodies = {root}
         for b in range(root + 1, m.nbody):
             if int(m.body_parentid[b]) in bodies:
                 bodies.add(b)
-        return self._geom_boxes(self._collision_geoms(bodies))
+        return self._collision_geoms(bodies)
+
+    def joint_part_boxes(self, joint: str) -> np.ndarray:
+        """World boxes of the collision geoms moved by a joint (its body and descendants)."""
+        return self._geom_boxes(self._joint_part_geoms(joint))
 
     def joint_part_axes(self, joint: str) -> np.ndarray:
         """(k, 3, 3) world rotations of the same geoms as `joint_part_boxes` (columns: the
         geom's local axes), so a planner can tell a bar's long side at any joint angle."""
-        m = self.env.sim.model._model
         d = self.env.sim.data._data
-        root = int(m.jnt_bodyid[m.joint(joint).id])
-        bodies = {root}
-        for b in range(root + 1, m.nbody):
-            if int(m.body_parentid[b]) in bodies:
-                bodies.add(b)
-        geoms = self._collision_geoms(bodies)
+        geoms = self._joint_part_geoms(joint)
         return np.array([d.geom_xmat[g].reshape(3, 3) for g in geoms]).reshape(len(geoms), 3, 3)
 
     def joint_part_half_sizes(self, joint: str) -> np.ndarray:
         """(k, 3) local half sizes (of the bounding box) of the same geoms."""
         m = self.env.sim.model._model
-        root = int(m.jnt_bodyid[m.joint(joint).id])
-        bodies = {root}
-        for b in range(root + 1, m.nbody):
-            if int(m.body_parentid[b]) in bodies:
-                bodies.add(b)
-        return np.array([m.geom_aabb[g, 3:] for g in self._collision_geoms(bodies)]).reshape(-1, 3)
+        return np.array([m.geom_aabb[g, 3:] for g in self._joint_part_geoms(joint)]).reshape(-1, 3)
 
     def joint_frame(self, joint: str) -> dict:
         """A joint's world `anchor` (3,), world `axis` (3,), `qpos`, `range` (2,) and
