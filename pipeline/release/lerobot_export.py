@@ -113,14 +113,15 @@ def history_episodes(cfg: Config, manifest: Path) -> list[ExportEpisode]:
 
 def recovery_episodes(cfg: Config, release: Path) -> list[ExportEpisode]:
     from pipeline.release.manifest import read_manifest
-    from pipeline.release.recovery_demos import DEMOS_NAME, read_demos, recoveries_dir, scene_id
+    from pipeline.release.recovery_demos import read_demos, scene_id
 
-    root = recoveries_dir(cfg)
-    if not (root / DEMOS_NAME).is_file() or not (release / MANIFEST_NAME).is_file():
+    recoveries = RunLayout.of(cfg).recoveries
+    root = recoveries.root
+    if not recoveries.demos.is_file() or not (release / MANIFEST_NAME).is_file():
         return []
     bddl = {scene_id(r): release / r.bddl_path for r in read_manifest(release / MANIFEST_NAME)}
     out = []
-    for d in read_demos(root / DEMOS_NAME):
+    for d in read_demos(recoveries.demos):
         if d.scene_id not in bddl:  # a demo of a scene no longer released
             continue
         out.append(ExportEpisode(f"{d.scene_id}/demo_{d.demo_index}", d.suite, d.task, d.instruction, root / d.path,

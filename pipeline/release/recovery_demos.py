@@ -3,7 +3,7 @@
 Inputs: the release manifest (`<release>/scenarios.parquet`, its scene files) and
 `cfg.release` (`recovery_demos` per scene, `recovery_demo_tries`, `recovery_demo_variation`,
 `certify_horizon`), `cfg.stage1.video` for the videos.
-Outputs under `<run>/recoveries/` (`recoveries_dir`):
+Outputs under `<run>/recoveries/` (`RunLayout.recoveries`):
     episodes/<suite>/<task>/<episode_id>/step_<NNNN>/demo_<k>/
         states.npy, steps.parquet          as stage 1 writes them (`EpisodeRecorder`)
         video_<camera>.mp4, frames.parquet as stage 1 renders them (its render process)
@@ -41,22 +41,16 @@ from pipeline.atomic import Completions, write_text, write_with
 from pipeline.config import Config
 from pipeline.errors import FatalError
 from pipeline.layout import RecoveriesLayout, RunLayout, episode_key
+from pipeline.layout import scene_id as layout_scene_id
 from pipeline.release.experts import attempt, recovery_expert
 from pipeline.release.manifest import MANIFEST_NAME, ScenarioRow, read_manifest
 from pipeline.release.scene_physics import restore_scene, scene_task
 from pipeline.sim import EnvCache
 from pipeline.stage1.recorder import EpisodeRecorder
 
-DEMOS_NAME = RecoveriesLayout.DEMOS
-
-
-def recoveries_dir(cfg: Config) -> Path:
-    return RunLayout.of(cfg).recoveries.root
-
-
 def scene_id(row: ScenarioRow) -> str:
     """The eval's scene id (`pipeline.eval.scenes`): stable across copies of the release."""
-    return f"{row.suite}/{row.task}/{row.episode_id}/step_{row.step:04d}"
+    return layout_scene_id(episode_key(row.suite, row.task, row.episode_id), row.step)
 
 
 def demo_seed(seed: int, scene: str, k: int) -> int:
@@ -187,7 +181,7 @@ def run(cfg: Config, console: Console | None = None) -> Path:
         raise FatalError(f"{release / MANIFEST_NAME}: no release to record demos from; run `recover release` first") from None
     except ValueError as e:
         raise FatalError(str(e)) from None
-    root = recoveries_dir(cfg)
+    root = RunLayout.of(cfg).recoveries.root
     done = Completions(root)
     v = cfg.stage1.video
     todo = [r for r in rows if not done.is_done(_unit(r))] if cfg.release.recovery_demos else []

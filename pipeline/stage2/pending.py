@@ -19,7 +19,7 @@ from pipeline.errors import FatalError
 from pipeline.records import EpisodeRecord, ManifestProblem, QuarantineEntry, QuarantineReason, read_episode_rows
 
 
-def read_failures(cfg: Config, paths: Stage2Layout) -> tuple[list[EpisodeRecord], int, int]:
+def read_failures(cfg: Config) -> tuple[list[EpisodeRecord], int, int]:
     """(failed episodes, failed total, successes skipped). Manifest rows that make no record
     are set aside here (`stage1_bad_manifest`), the rest go on."""
     layout = RunLayout.of(cfg)
@@ -30,7 +30,7 @@ def read_failures(cfg: Config, paths: Stage2Layout) -> tuple[list[EpisodeRecord]
         episodes, problems = read_episode_rows(manifest)
     except Exception as e:  # the whole file unreadable (truncated): nothing to set aside row by row
         raise FatalError(f"{manifest}: unreadable stage 1 manifest ({type(e).__name__}: {e})") from None
-    _set_aside_manifest_rows(paths, problems, layout.rel(manifest).as_posix())
+    _set_aside_manifest_rows(layout.stage2, problems, layout.rel(manifest).as_posix())
     failed = [e for e in episodes if not e.success]
     n_success = len(episodes) - len(failed) + sum(p.success is True for p in problems)
     return failed, len(failed) + sum(p.success is not True for p in problems), n_success

@@ -43,7 +43,7 @@ class Stage2(Stage[EpisodeRecord]):
     def units(self, cfg: Config) -> list[EpisodeRecord]:
         from pipeline.stage2.pending import read_failures
 
-        failed, n_failed, n_success = read_failures(cfg, self.paths)
+        failed, n_failed, n_success = read_failures(cfg)
         self.counts = {"failed": n_failed, "successes": n_success}
         return failed
 
