@@ -20,6 +20,8 @@ from pipeline.sim import SimEnv
 
 FINGER_REACH = 0.047  # fingertip centre from the grip site along the closing axis, open
 FINGER_HALF = 0.01  # half thickness of a closed finger pair along the closing axis
+LOW_DRAWER_M = 0.08  # a handle lower than this over the table: push with a pitched fist
+PUSH_PITCH = 0.9  # radians from straight down, towards the push
 
 
 def part_joint(env: SimEnv, name: str) -> str | None:
@@ -134,12 +136,25 @@ def _pull_drawer(ctx: Ctx, joint: str) -> Plan:
     yield ctx.move(s.eef() + [0, 0, 0.06], tol=0.02, rot_tol=0.15, max_steps=40, label="untilt")
 
 
+def _front_panel(env: SimEnv, joint: str, k: int, d: float) -> np.ndarray:
+    """The drawer's front panel: the outermost of the part's boxes that span most of the
+    drawer's width (the handle and its posts are narrow)."""
+    boxes = env.joint_part_boxes(joint)
+    width = boxes[:, 1, 1 - k] - boxes[:, 0, 1 - k]
+    wide = boxes[width > 0.6 * width.max()]
+    front = [b[1, k] if d > 0 else -b[0, k] for b in wide]
+    return wide[int(np.argmax(front))]
+
+
 def _push_drawer(ctx: Ctx, joint: str) -> Plan:
     s, env = ctx.scene, ctx.scene.env
     fr = env.joint_frame(joint)
     sign = _open_sign(fr["range"])
     pull = fr["axis"] * sign
     box, k, d = _handle(env, joint, pull)
+    if (box[0, 2] + box[1, 2]) / 2 < s.table_height() + LOW_DRAWER_M:
+        yield from _push_low_drawer(ctx, joint)
+        return
     front = box[1, k] if d > 0 else box[0, k]
     pos = (box[0] + box[1]) / 2
     pos[k] = front + d * 0.035
@@ -157,6 +172,44 @@ def _push_drawer(ctx: Ctx, joint: str) -> Plan:
     target[k] = front + d * FINGER_HALF - d * (u + 0.025)
     yield ctx.move(target, gripper=1.0, speed=0.6, yaw=yaw, tol=0.008, max_steps=60, label="push")
     yield ctx.move(s.eef() + pull * 0.04, gripper=1.0, yaw=yaw, tol=0.015, max_steps=20, label="back_off")
+    yield ctx.move(s.eef() + [0, 0, 0.08], gripper=1.0, yaw=yaw, tol=0.02, max_steps=30, label="retreat")
+
+
+def _push_low_drawer(ctx: Ctx, joint: str) -> Plan:
+    """A drawer just over the table (the white cabinet's bottom one): a top-down fist at
+    its handle brings the forearm down onto the cabinet's top edge before the drawer is
+    shut. So the fist comes down close to the front panel, just over the handle bar (clear
+    of whatever stands in front of the handle), pitched to point into the drawer (the
+    wrist trails behind, the forearm stays off the cabinet), and pushes past closed."""
+    s, env = ctx.scene, ctx.scene.env
+    fr = env.joint_frame(joint)
+    sign = _open_sign(fr["range"])
+    pull = fr["axis"] * sign
+    box, k, d = _handle(env, joint, pull)
+    panel = _front_panel(env, joint, k, d)
+    face = panel[1, k] if d > 0 else panel[0, k]
+    part_top = float(env.joint_part_boxes(joint)[:, 1, 2].max())
+    pos = (box[0] + box[1]) / 2
+    # fingertips (~1 cm below the grip site) over the handle bar, under the part's top
+    pos[2] = max(part_top - 0.012, box[1, 2] + 0.02)
+    pos[k] = face + d * (FINGER_HALF + 0.006)
+    yaw = np.pi / 2 if k == 1 else 0.0  # the palm's long side across the push
+    push = -np.array([pull[0], pull[1], 0.0]) / np.linalg.norm(pull[:2])
+    point = push * np.sin(PUSH_PITCH) + np.array([0.0, 0.0, -1.0]) * np.cos(PUSH_PITCH)
+    ctx.yaw_hold = yaw
+    if s.gripper_open():
+        yield Grip(1.0, ctx.close_steps, label="make_fist")
+    hover = pos + [0, 0, 0.08]
+    yield from travel(ctx, hover, yaw, 1.0, s.path_clearance(s.eef(), hover, 0.06, set()) + 0.07)
+    ctx.approach_hold = point
+    yield ctx.move(pos, gripper=1.0, speed=0.6, yaw=yaw, approach=point, tol=0.01, max_steps=50, label="face_drawer")
+    u = sign * env.joint_frame(joint)["qpos"]
+    target = pos.copy()
+    target[k] = face + d * FINGER_HALF - d * (u + 0.03)  # past closed: LIBERO's `close` is qpos beyond 0
+    yield ctx.move(target, gripper=1.0, speed=0.6, yaw=yaw, approach=point, tol=0.008, max_steps=60, label="push")
+    yield ctx.move(s.eef() + pull * 0.04, gripper=1.0, yaw=yaw, approach=point, tol=0.015, max_steps=20,
+                   label="back_off")
+    ctx.approach_hold = None
     yield ctx.move(s.eef() + [0, 0, 0.08], gripper=1.0, yaw=yaw, tol=0.02, max_steps=30, label="retreat")
 
 

@@ -38,11 +38,14 @@ def axis_angle_matrix(axis: np.ndarray, angle: float) -> np.ndarray:
 def hand_orientation(yaw: float, approach: np.ndarray | None = None) -> np.ndarray:
     """Top-down hand at `yaw`; or, given a horizontal `approach`, that hand tilted by 90
     degrees so it points along `approach` (fingers then close vertically when the yaw's
-    closing axis is parallel to `approach`)."""
+    closing axis is parallel to `approach`). An `approach` pointing partly down tilts the
+    hand by its angle from straight down (a fist pitched into a low drawer's face)."""
     base = yaw_matrix(yaw) @ TOP_DOWN
     if approach is None:
         return base
-    return axis_angle_matrix(np.cross([0.0, 0.0, -1.0], approach), np.pi / 2) @ base
+    a = np.asarray(approach, dtype=float)
+    angle = np.arccos(np.clip(-a[2] / np.linalg.norm(a), -1.0, 1.0))  # pi/2 when horizontal
+    return axis_angle_matrix(np.cross([0.0, 0.0, -1.0], a), angle) @ base
 
 
 def rotation_error(target: np.ndarray, current: np.ndarray) -> np.ndarray:
