@@ -99,19 +99,28 @@ def grasp(ctx: Ctx, obj: str, dest: np.ndarray | None = None, choice: int = 0, h
 
 
 def place_xy(ctx: Ctx, obj: str, target: str) -> np.ndarray:
+    return _place_choice(ctx, obj, target)[0]
+
+
+def place_room(ctx: Ctx, obj: str, target: str) -> bool:
+    """Whether `target` has a spot where `obj` goes in clear of walls and overhangs."""
+    return _place_choice(ctx, obj, target)[1] == 0
+
+
+def _place_choice(ctx: Ctx, obj: str, target: str) -> tuple[np.ndarray, int]:
     """Where the object's body should end up (xy): on an object's body or a region's centre;
-    in a drawer, the point nearest its centre with open sky above the object's footprint
-    (an open bottom drawer lies partly under the drawers above it)."""
+    in a drawer, the point nearest its centre where the object's footprint lies inside the
+    walls with open sky above (an open bottom drawer lies partly under the drawers above it
+    and their handles)."""
     s = ctx.scene
     xy = s.pos(target)[:2].copy()
     if not s.env.is_region(target):
-        return xy
+        return xy, 0
     r = s.env.region(target)
     drawer = bool(r["joints"])
     half = np.abs(r["mat"]) @ r["size"]
     top = r["pos"][2] + half[2]
     size = s.box(obj).size[:2]
-    rad = 0.5 * float(max(size)) + 0.01  # sky over the whole footprint (a bowl rim hits the face above)
     # other objects already standing in the region (the second moka pot on a stove)
     reach = 0.5 * float(max(size))  # objects within this of the region count
     others = [s.box(o) for o in s.env.object_names if o != obj]
@@ -119,22 +128,59 @@ def place_xy(ctx: Ctx, obj: str, target: str) -> np.ndarray:
     if s.env.region(target)["parent"] in s.env.object_names:
         others = []  # a container object (a basket): things may share its middle
     if not drawer and not others:
-        return xy
+        return xy, 0
     best = None
-    for fx in np.linspace(-1.0, 1.0, 11):
-        for fy in np.linspace(-1.0, 1.0, 11):
+    # a drawer leaves a window only a few mm long between its front wall and the handles
+    # of the drawers above (the white cabinet's bottom drawer and a bowl): a fine grid
+    # along its axis, and the object's footprint (not its body origin) kept off both
+    fine = int(np.argmax(np.abs(np.asarray(s.env.joint_frame(r["joints"][0])["axis"][:2])))) if drawer else -1
+    nx, ny = (41 if fine == 0 else 7 if drawer else 11), (41 if fine == 1 else 7 if drawer else 11)
+    blocked = _drawer_clearance(s, obj, r["joints"][0], r["pos"][:2], half[:2], top) if drawer else (lambda p: 0)
+    for fx in np.linspace(-1.0, 1.0, nx):
+        for fy in np.linspace(-1.0, 1.0, ny):
             p = r["pos"][:2] + half[:2] * [fx, fy]
             # overlap (m^2) of the footprint with objects already there: least wins
             lo, hi = p - size / 2, p + size / 2
             crowd = sum(float(np.prod(np.clip(np.minimum(hi, b.hi[:2]) - np.maximum(lo, b.lo[:2]), 0, None)))
                         for b in others)
-            probes = [p + d for d in ([0, 0], [rad, 0], [-rad, 0], [0, rad], [0, -rad])]
-            if drawer and any((h := s.env.ray_down(q, top + 0.5, top, ignore=obj)) is not None and h > top for q in probes):
-                continue
-            d = 100 * crowd + float(np.linalg.norm(p - xy))
+            # footprint cells over a wall or under an overhang: fewest wins (none, where there is room)
+            d = (blocked(p), 100 * crowd + float(np.linalg.norm(p - xy)))
             if best is None or d < best[0]:
                 best = (d, p)
-    return xy if best is None else best[1]
+    return (xy, 0) if best is None else (best[1], best[0][0])
+
+
+def _drawer_clearance(s: Scene, obj: str, joint: str, centre: np.ndarray, half: np.ndarray, top: float):
+    """For a drawer region: a function of the object's body xy giving how many cells of its
+    footprint (a rounded box, 4 mm margin) lie over a wall or under an overhang (anything
+    struck by a ray from above higher than 2 cm over the drawer floor). Heights are ray-cast
+    once on a 5 mm grid."""
+    floor = s.support_top(centre, 0.01, {obj}, below=top)
+    box = s.box(obj)
+    edge = 0.5 * box.size[:2] + 0.004
+    shift = box.centre[:2] - s.env.object_pose(obj)[0][:2]
+    step = 0.005
+    xs = np.arange(centre[0] - half[0] - edge[0], centre[0] + half[0] + edge[0] + step, step)
+    ys = np.arange(centre[1] - half[1] - edge[1], centre[1] + half[1] + edge[1] + step, step)
+    hit = np.array([[(h := s.env.ray_down(np.array([x, y]), top + 0.5, floor, ignore=obj)) is not None
+                     and h > floor + 0.02 for y in ys] for x in xs])
+    gx, gy = np.meshgrid(xs, ys, indexing="ij")
+    # the drawer's own walls are thinner than the grid step: mark them from their boxes
+    for b in s.env.joint_part_boxes(joint):
+        if b[1, 2] > floor + 0.02:
+            hit |= (gx >= b[0, 0] - step / 2) & (gx <= b[1, 0] + step / 2) & (gy >= b[0, 1] - step / 2) & (gy <= b[1, 1] + step / 2)
+
+    def blocked(p: np.ndarray) -> int:
+        c = p + shift
+        inside = ((gx - c[0]) / edge[0]) ** 4 + ((gy - c[1]) / edge[1]) ** 4 <= 1.0
+        return int(np.count_nonzero(hit & inside))
+
+    return blocked
+
+
+def box_centre_offset(s: Scene, obj: str) -> np.ndarray:
+    """xy of the object's box centre relative to its body origin (a bowl's is off-centre)."""
+    return s.box(obj).centre[:2] - s.env.object_pose(obj)[0][:2]
 
 
 def support_ceiling(env, target: str) -> float:

@@ -18,7 +18,7 @@ import os
 from collections import Counter
 from collections.abc import Callable
 
-from pipeline.policies.scripted import articulated
+from pipeline.policies.scripted import articulated, drawer_room
 from pipeline.policies.scripted.grasps import plan_grasp
 from pipeline.policies.scripted.planner import order_goal
 from pipeline.policies.scripted.recovery import checks
@@ -48,9 +48,11 @@ def next_subgoal(ctx: Ctx, steps: list[tuple[str, ...]], goal: list[tuple[str, .
         if c in goal:
             if not s.satisfied(c):
                 todo.append(c)
-        elif c[0] == "open" and articulated.is_closed_enough(s.env, c[1]):
-            # an implied open: only while something must still go in
-            if any(g[0] == "in" and not s.satisfied(g) and articulated.openable(s.env, g[2]) == c[1] for g in goal):
+        elif c[0] == "open":
+            # an implied open: only while something must still go in, and the thing is
+            # closed or (a drawer) too short for it
+            going = [g[1] for g in goal if g[0] == "in" and not s.satisfied(g) and articulated.openable(s.env, g[2]) == c[1]]
+            if going and (articulated.is_closed_enough(s.env, c[1]) or drawer_room.cramped(ctx, c[1], going[0])):
                 todo.append(c)
     held = s.holding_any()
     for c in todo:
@@ -101,7 +103,8 @@ def recover(ctx: Ctx, now: Callable[[], int], budget: int | None) -> Plan:
                 yield from put_aside(ctx, block[0], aside[block[0]] - 1)
                 continue
         _debug("subgoal", sub, "try", tries[sub], "held", held)
-        if sub[0] == "open" and (joint := articulated.part_joint(s.env, sub[1])) is not None:
+        if (sub[0] == "open" and (joint := articulated.part_joint(s.env, sub[1])) is not None
+                and articulated.is_closed_enough(s.env, sub[1])):  # (an open one only goes a little further)
             # an object the opened drawer would overhang cannot be grasped afterwards: first aside
             sweep = checks.drawer_sweep(s, joint)
             under = [m for m in movers if sweep is not None and checks.under_sweep(s, m, sweep) and aside[m] < MAX_ASIDE]
@@ -116,6 +119,9 @@ def recover(ctx: Ctx, now: Callable[[], int], budget: int | None) -> Plan:
             ctx.noise.attempt = tries[sub]
         if sub[0] in ("on", "in"):
             yield from pick_place_once(ctx, sub, tries[sub])
+        elif sub not in goal and not articulated.is_closed_enough(s.env, sub[1]):  # open, but too short
+            going = next(g[1] for g in goal if g[0] == "in" and articulated.openable(s.env, g[2]) == sub[1])
+            yield from drawer_room.make_room(ctx, sub, going)
         else:
             yield from operate_once(ctx, sub)
         if not s.satisfied(sub) or sub not in goal:

@@ -1,0 +1,79 @@
+"""Skill: make room in a drawer before something goes in (open it, or open it further).
+
+Input: a `Ctx`, the drawer's region (`white_cabinet_1_bottom_region`) and the object that
+must go in. A drawer that is open by LIBERO's predicate can still be too short for the
+object: the white cabinet's bottom drawer, 14.6 cm out, leaves no spot where a bowl comes
+down clear of both its front wall and the handles of the drawers above it; 1.4 cm more
+does. A closed drawer is opened as usual; an open but cramped one is pulled to the end of
+its slide from inside: a closed fist lowered just behind the front wall drags it out (no
+handle grasp low over the table).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pipeline.policies.scripted.articulated import FINGER_HALF, _front_panel, _handle, _open_sign, open_part, part_joint
+from pipeline.policies.scripted.primitives import Grip
+from pipeline.policies.scripted.skills import Ctx, Plan, place_room, travel
+
+END_M = 0.005  # a slide this close to the end of its range counts as fully out
+
+
+def cramped(ctx: Ctx, region: str, obj: str) -> bool:
+    """An open drawer, short of the end of its slide, with no clear spot for `obj`."""
+    env = ctx.scene.env
+    joint = part_joint(env, region) if env.is_region(region) else None
+    if joint is None or env.joint_frame(joint)["kind"] != "slide" or not env.object_state(region).is_open():
+        return False
+    fr = env.joint_frame(joint)
+    if _open_sign(fr["range"]) * fr["qpos"] >= float(np.max(np.abs(fr["range"]))) - END_M:
+        return False
+    return not place_room(ctx, obj, region)
+
+
+def make_room(ctx: Ctx, conjunct: tuple[str, ...], obj: str) -> Plan:
+    """`conjunct` is an implied ("open", region) before `obj` goes into the region."""
+    env = ctx.scene.env
+    if not env.object_state(conjunct[1]).is_open():
+        yield from open_part(ctx, conjunct)
+    elif cramped(ctx, conjunct[1], obj):
+        ctx.begin("open", conjunct, conjunct[1])
+        joint = part_joint(env, conjunct[1])
+        yield from _drag_out(ctx, joint)
+        if ctx.truth is not None:
+            ctx.end("achieved" if not cramped(ctx, conjunct[1], obj) else "half_open",
+                    f"{joint} at {env.joint_frame(joint)['qpos']:.3f}")
+
+
+def _drag_out(ctx: Ctx, joint: str) -> Plan:
+    s, env = ctx.scene, ctx.scene.env
+    fr = env.joint_frame(joint)
+    sign = _open_sign(fr["range"])
+    pull = fr["axis"] * sign
+    pull = pull / np.linalg.norm(pull)
+    box, k, d = _handle(env, joint, pull)
+    panel = _front_panel(env, joint, k, d)
+    face = panel[1, k] if d > 0 else panel[0, k]
+    boxes = env.joint_part_boxes(joint)
+    width = boxes[:, 1, 1 - k] - boxes[:, 0, 1 - k]
+    floor = float(boxes[:, 1, 2].min())
+    # the front wall: the wide upright boxes at the front; its inner face is their innermost side
+    outer = np.where(d > 0, boxes[:, 1, k], boxes[:, 0, k])
+    front = boxes[(width > 0.6 * width.max()) & (np.abs(outer - face) < 0.03) & (boxes[:, 1, 2] > floor + 0.02)]
+    inner = float(front[:, 0, k].min()) if d > 0 else float(front[:, 1, k].max())
+    pos = (panel[0] + panel[1]) / 2
+    pos[k] = inner - d * (FINGER_HALF + 0.008)
+    pos[2] = floor + 0.025  # fingertips about 1.5 cm over the drawer floor
+    yaw = np.pi / 2 if k == 1 else 0.0  # the palm's long side along the wall
+    ctx.yaw_hold = yaw
+    if s.gripper_open():
+        yield Grip(1.0, ctx.close_steps, label="make_fist")
+    hover = pos + [0, 0, 0.1]
+    yield from travel(ctx, hover, yaw, 1.0, s.path_clearance(s.eef(), hover, 0.06, set()) + 0.07)
+    yield ctx.move(pos, gripper=1.0, speed=0.6, yaw=yaw, tol=0.01, max_steps=50, label="into_drawer")
+    u = sign * env.joint_frame(joint)["qpos"]
+    full = float(np.max(np.abs(fr["range"])))
+    yield ctx.move(s.eef() + pull * (full - u + 0.01), gripper=1.0, speed=0.5, yaw=yaw, tol=0.006, max_steps=30,
+                   label="drag_out")
+    yield ctx.move(s.eef() + [0, 0, 0.1], gripper=1.0, yaw=yaw, tol=0.02, max_steps=30, label="retreat")
