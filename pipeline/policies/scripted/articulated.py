@@ -192,7 +192,7 @@ def _push_low_drawer(ctx: Ctx, joint: str) -> Plan:
     pos = (box[0] + box[1]) / 2
     # fingertips (~1 cm below the grip site) over the handle bar, under the part's top
     pos[2] = max(part_top - 0.012, box[1, 2] + 0.02)
-    pos[k] = face + d * (FINGER_HALF + 0.006)
+    pos[k] = face + d * (FINGER_HALF + 0.01)
     yaw = np.pi / 2 if k == 1 else 0.0  # the palm's long side across the push
     push = -np.array([pull[0], pull[1], 0.0]) / np.linalg.norm(pull[:2])
     point = push * np.sin(PUSH_PITCH) + np.array([0.0, 0.0, -1.0]) * np.cos(PUSH_PITCH)
@@ -202,6 +202,9 @@ def _push_low_drawer(ctx: Ctx, joint: str) -> Plan:
     hover = pos + [0, 0, 0.08]
     yield from travel(ctx, hover, yaw, 1.0, s.path_clearance(s.eef(), hover, 0.06, set()) + 0.07)
     ctx.approach_hold = point
+    # pitch the fist and line it up over the gap in front of the panel before coming down:
+    # a diagonal descent catches the fingertips on the panel's top edge
+    yield ctx.move(hover, gripper=1.0, yaw=yaw, approach=point, tol=0.006, rot_tol=0.15, max_steps=40, label="pitch")
     yield ctx.move(pos, gripper=1.0, speed=0.6, yaw=yaw, approach=point, tol=0.01, max_steps=50, label="face_drawer")
     u = sign * env.joint_frame(joint)["qpos"]
     target = pos.copy()
