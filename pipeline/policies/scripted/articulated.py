@@ -50,6 +50,28 @@ def openable(env: SimEnv, region: str) -> str | None:
     return None
 
 
+def close_lower_first(env: SimEnv, steps: list[tuple[str, ...]]) -> list[tuple[str, ...]]:
+    """`steps` with a drawer to close moved before a drawer above it to open: the opened
+    one would stick out over the lower one's front, in the way of the push (and be pushed
+    shut itself)."""
+    def slide_floor(name: str) -> float | None:
+        joint = part_joint(env, name)
+        if joint is None or env.joint_frame(joint)["kind"] != "slide":
+            return None
+        return float(env.joint_part_boxes(joint)[:, 0, 2].min())
+
+    out = list(steps)
+    for c in steps:
+        zc = slide_floor(c[1]) if c[0] == "close" else None
+        if zc is None:
+            continue
+        above = [i for i, o in enumerate(out) if o[0] == "open" and (zo := slide_floor(o[1])) is not None and zo > zc]
+        if above and above[0] < out.index(c):
+            out.remove(c)
+            out.insert(above[0], c)
+    return out
+
+
 def is_closed_enough(env: SimEnv, name: str) -> bool:
     """True while `name` is not open (by LIBERO's own predicate)."""
     return not env.object_state(name).is_open()

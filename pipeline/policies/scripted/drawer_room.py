@@ -18,6 +18,7 @@ from pipeline.policies.scripted.primitives import Grip
 from pipeline.policies.scripted.skills import Ctx, Plan, place_room, travel
 
 END_M = 0.005  # a slide this close to the end of its range counts as fully out
+PART_WAY_M = 0.06  # out this far, a fist fits behind the front wall (from above)
 
 
 def cramped(ctx: Ctx, region: str, obj: str) -> bool:
@@ -30,6 +31,27 @@ def cramped(ctx: Ctx, region: str, obj: str) -> bool:
     if _open_sign(fr["range"]) * fr["qpos"] >= float(np.max(np.abs(fr["range"]))) - END_M:
         return False
     return not place_room(ctx, obj, region)
+
+
+def part_way_out(env, region: str) -> bool:
+    """A drawer pulled out far enough for a fist behind its front wall, but not yet open by
+    LIBERO's predicate (a pull stopped short: the tilted hand met something behind it)."""
+    joint = part_joint(env, region) if env.is_region(region) else None
+    if joint is None or env.joint_frame(joint)["kind"] != "slide" or env.object_state(region).is_open():
+        return False
+    fr = env.joint_frame(joint)
+    return _open_sign(fr["range"]) * fr["qpos"] >= PART_WAY_M
+
+
+def finish_opening(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:
+    """Drag a part-way-out drawer to the end of its slide from inside."""
+    env = ctx.scene.env
+    joint = part_joint(env, conjunct[1])
+    ctx.begin("open", conjunct, conjunct[1])
+    yield from _drag_out(ctx, joint)
+    if ctx.truth is not None:
+        done = env.object_state(conjunct[1]).is_open()
+        ctx.end("achieved" if done else "half_open", f"{joint} at {env.joint_frame(joint)['qpos']:.3f}")
 
 
 def make_room(ctx: Ctx, conjunct: tuple[str, ...], obj: str) -> Plan:

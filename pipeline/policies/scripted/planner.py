@@ -58,7 +58,7 @@ def plan_episode(ctx: Ctx) -> Plan:
     goal = [tuple(c) for c in s.env.goal]
     for c in goal:
         skill_for(c)  # fail fast on an unknown predicate
-    steps = order_goal(goal, lambda region: articulated.openable(s.env, region))
+    steps = articulated.close_lower_first(s.env, order_goal(goal, lambda region: articulated.openable(s.env, region)))
     held = s.holding_any()
     first = [c for c in steps if c[0] in ("on", "in") and c[1] == held and not s.satisfied(c)]
     if first:

@@ -4,7 +4,7 @@ part skills with a single attempt; a retry differs by `RetryNoise`'s shift."""
 
 from __future__ import annotations
 
-from pipeline.policies.scripted import articulated, knobs
+from pipeline.policies.scripted import articulated, drawer_room, knobs
 from pipeline.policies.scripted.skills import Ctx, Plan
 
 
@@ -12,7 +12,9 @@ def operate_once(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:
     kind = conjunct[0]
     saved, ctx.max_attempts = ctx.max_attempts, 1
     try:
-        if kind == "open":
+        if kind == "open" and drawer_room.part_way_out(ctx.scene.env, conjunct[1]):
+            yield from drawer_room.finish_opening(ctx, conjunct)  # not the tilted pull again
+        elif kind == "open":
             yield from articulated.open_part(ctx, conjunct)
         elif kind == "close":
             yield from articulated.close_part(ctx, conjunct)

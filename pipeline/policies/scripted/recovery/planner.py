@@ -64,7 +64,7 @@ def next_subgoal(ctx: Ctx, steps: list[tuple[str, ...]], goal: list[tuple[str, .
 def recover(ctx: Ctx, now: Callable[[], int], budget: int | None) -> Plan:
     s = ctx.scene
     goal = [tuple(c) for c in s.env.goal]
-    steps = order_goal(goal, lambda region: articulated.openable(s.env, region))
+    steps = articulated.close_lower_first(s.env, order_goal(goal, lambda region: articulated.openable(s.env, region)))
     tries: Counter = Counter()
     aside: Counter = Counter()
     keep = {n for c in goal for n in c[1:]}  # never moved aside: goal objects, targets and
