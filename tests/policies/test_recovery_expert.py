@@ -93,3 +93,35 @@ def test_variation_is_zero_noise_at_zero_and_bounded():
     with pytest.raises(ValueError, match="variation"):
         variation_levels(1.5)
     assert np.isfinite(levels.grasp_offset_m)
+
+
+@pytest.fixture(scope="module")
+def white_cabinet():
+    task = tasks(["libero_10"])[3]  # put the black bowl in the bottom drawer of the cabinet and close it
+    env = build_env(task)
+    yield task, env
+    env.close()
+
+
+def test_a_bowl_fits_the_white_cabinets_bottom_drawer_only_pulled_out_to_the_end(white_cabinet):
+    from pipeline.config import ScriptedNoise
+    from pipeline.policies.scripted.drawer_room import cramped
+    from pipeline.policies.scripted.noise import Noise, episode_rng
+    from pipeline.policies.scripted.skills import Ctx, place_room
+
+    task, env = white_cabinet
+    start(env)  # the drawer starts 14.6 cm out: open, but the bowl meets its front wall or the handles above
+    ctx = Ctx(scene=Scene(env), noise=Noise(ScriptedNoise(), episode_rng(0, task.task_id)))
+    region = "white_cabinet_1_bottom_region"
+    assert env.object_state(region).is_open()
+    assert not place_room(ctx, "akita_black_bowl_1", region) and cramped(ctx, region, "akita_black_bowl_1")
+    set_joint(env, "white_cabinet_1_bottom_level", -0.16)
+    assert place_room(ctx, "akita_black_bowl_1", region) and not cramped(ctx, region, "akita_black_bowl_1")
+
+
+def test_the_white_cabinets_low_bottom_drawer_is_pushed_shut():
+    task = tasks(["libero_90"])[22]  # close the bottom drawer of the cabinet (a bowl stands before it)
+    with build_env(task) as env:
+        start(env)
+        result, policy = finish(env, task, horizon=150)
+        assert result.success

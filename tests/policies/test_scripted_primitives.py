@@ -50,6 +50,13 @@ def test_tilted_hand_points_along_the_approach_with_vertical_fingers():
     assert np.allclose(np.abs(r[:, 0]), [0, 0, 1], atol=1e-9)  # fingers close vertically
 
 
+def test_an_approach_pointing_partly_down_pitches_the_hand_by_its_angle():
+    a = np.array([0.0, np.sin(0.9), -np.cos(0.9)])
+    r = hand_orientation(np.pi / 2, a)
+    assert np.allclose(r[:, 2], a, atol=1e-9)  # the gripper axis points along the approach
+    assert np.allclose(hand_orientation(0.3, np.array([0.0, 0.0, -1.0])), hand_orientation(0.3))
+
+
 def test_same_seed_and_task_draw_the_same_noise_and_other_seeds_do_not():
     levels = ScriptedNoise(grasp_offset_m=0.01, action_noise=0.1, speed_scale=0.3, gripper_timing_steps=3)
     a = Noise(levels, episode_rng(7, "libero_spatial/x"))

@@ -45,6 +45,8 @@ def hand_orientation(yaw: float, approach: np.ndarray | None = None) -> np.ndarr
         return base
     a = np.asarray(approach, dtype=float)
     angle = np.arccos(np.clip(-a[2] / np.linalg.norm(a), -1.0, 1.0))  # pi/2 when horizontal
+    if angle < 1e-9:  # straight down: no tilt (and no axis to tilt about)
+        return base
     return axis_angle_matrix(np.cross([0.0, 0.0, -1.0], a), angle) @ base
 
 
