@@ -25,6 +25,11 @@ Rules:
   2 * `drop_window` steps, nor before the next hold begins (a release into a basket that
   lands there is a placement). Step: the open
   command that released it (if within `grasp_window` steps before), else the release.
+- object_misplaced: a hold of a target ends after an open command (within `grasp_window`
+  steps before the hold ends) and is no drop (it was set down on something, or fell less
+  than `drop_m`), and goal progress does not rise within 2 * `drop_window` steps nor
+  before the next hold begins: the target was let go where the goal does not want it.
+  Step: that open command (the release at the wrong place).
 - object_toppled: an object not held, and not held in the last `drop_window` steps (a
   release or a slip that tips it is that event, an object tipping over inside its
   container is no failure), tilts >= `topple_deg` from its start orientation, and was not
@@ -168,12 +173,15 @@ def grasp_lost_and_dropped(ev: Evidence, th: Thresholds) -> list[SimEvent]:
                         if "robot" not in c.split("|"))
         nxt = next((h for h, _, _ in all_holds if h > e), n)
         progressed = ev.goal_progress[e:max(e + 1, min(nxt, e + 2 * th.drop_window))].max() > ev.goal_progress[e - 1]
+        opens = [t for t in range(max(s, e - th.grasp_window), e) if not closed[t] and (t == 0 or closed[t - 1])]
         if fell >= th.drop_m and not supported and not progressed:
-            opens = [t for t in range(max(s, e - th.grasp_window), e) if not closed[t] and (t == 0 or closed[t - 1])]
             out.append(_ev(ev, opens[-1] if opens else e, "object_dropped", obj,
                            detail=f"released unsupported, fell {fell:.3f} m"))
         elif closed[e - 1] and closed[e]:
             out.append(_ev(ev, e, "grasp_lost", obj, detail="slipped out of the closed gripper"))
+        elif opens and obj in ev.targets and not progressed:
+            out.append(_ev(ev, opens[-1], EventKind.object_misplaced, obj,
+                           detail=f"released and set down (fell {fell:.3f} m), goal progress unchanged"))
     return out
 
 

@@ -57,13 +57,34 @@ def test_an_unsupported_release_that_falls_is_a_drop_at_the_open_command():
     assert (e.kind, e.step, e.object) == ("object_dropped", 40, "bowl_1")
 
 
-def test_a_release_while_resting_on_a_support_is_not_a_drop():
+def test_a_release_on_the_goal_that_raises_progress_is_neither_a_drop_nor_a_misplacement():
     ev = make_evidence()
     ev.gripper_command[10:40] = 1.0
     ev.grasped[12:42] = ["bowl_1"] * 30
     ev.per_object["lift"]["bowl_1"][12:42] = 0.05
     for t in range(38, 60):
         ev.contacts[t] = ["bowl_1|plate_1"]
+    ev.goal_progress[44:] = 1.0
+    assert grasp_lost_and_dropped(ev, TH) == []
+
+
+def test_a_target_set_down_without_goal_progress_is_misplaced_at_the_open_command():
+    ev = make_evidence()
+    ev.gripper_command[10:40] = 1.0
+    ev.grasped[12:42] = ["bowl_1"] * 30
+    ev.per_object["lift"]["bowl_1"][12:42] = 0.05
+    for t in range(38, 60):
+        ev.contacts[t] = ["bowl_1|table"]  # set down beside the plate: supported, no fall
+    [e] = grasp_lost_and_dropped(ev, TH)
+    assert (e.kind, e.step, e.object) == ("object_misplaced", 40, "bowl_1")
+
+
+def test_a_non_target_set_down_anywhere_is_no_misplacement():
+    ev = make_evidence()
+    ev.gripper_command[10:40] = 1.0
+    ev.grasped[12:42] = ["cup_1"] * 30  # the goal does not want the cup anywhere
+    for t in range(38, 60):
+        ev.contacts[t] = ["cup_1|table"]
     assert grasp_lost_and_dropped(ev, TH) == []
 
 
