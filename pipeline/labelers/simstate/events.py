@@ -17,9 +17,12 @@ Rules:
 - grasp_missed: a close (>= `min_run` steps) with the grip site within `near_m` of an
   object (the nearest target if one is that near, else the nearest object), during which no
   hold begins and the robot touches no operated fixture (gripping a knob or pushing a
-  drawer with a fist is not a grasp). Step: the first closed step. Object: that object.
-- grasp_lost: a hold ends while the gripper is still commanded closed, and the object stays
-  ungrasped >= `min_run` steps. Step: the first ungrasped step.
+  drawer with a fist is not a grasp). A hold that never raised its object >= `lift_m` and
+  ended with the gripper still closed (squeezed on its support, it slipped out) is no
+  grasp either. Step: the first closed step. Object: that object.
+- grasp_lost: a hold (runs in hand apart by fewer than `min_run` states are one) ends while
+  the gripper is still commanded closed, after it had raised the object >= `lift_m`.
+  Step: the first ungrasped step.
 - object_dropped: a hold ends while the object is supported by nothing but the robot, and
   within `drop_window` steps it falls >= `drop_m`, and goal progress does not rise within
   2 * `drop_window` steps, nor before the next hold begins (a release into a basket that
@@ -78,6 +81,7 @@ class Thresholds:
     min_run: int = 3  # steps a state must last to count (filters one-step flicker)
     merge_gap: int = 8  # closed runs apart by fewer open steps are one close (command flicker)
     hold_steps: int = 6  # states in hand that make a hold (fewer: brushing, a pinch that slips)
+    lift_m: float = 0.01  # a hold that never raised its object this much and slipped out closed was no grasp
     drop_window: int = 30
     drop_m: float = 0.03
     topple_deg: float = 45.0
@@ -126,11 +130,21 @@ def operated(ev: Evidence) -> list[str]:
 
 
 def holds(ev: Evidence, th: Thresholds, obj: str | None = None) -> list[tuple[int, int, str]]:
-    """(start, end, object) of every hold (of `obj`, or of any object)."""
+    """(start, end, object) of every hold (of `obj`, or of any object); runs in hand apart by
+    fewer than `min_run` states are one hold (contact flickers while the fingers settle)."""
     out = []
     for o in ([obj] if obj else ev.objects):
-        out += [(s, e, o) for s, e in _runs(np.array([g == o for g in ev.grasped])) if e - s >= th.hold_steps]
+        out += [(s, e, o) for s, e in _merged(np.array([g == o for g in ev.grasped]), th.min_run)
+                if e - s >= th.hold_steps]
     return sorted(out)
+
+
+def unlifted_slip(ev: Evidence, th: Thresholds, s: int, e: int, obj: str) -> bool:
+    """A hold that never raised its object `lift_m` and ended with the gripper still closed:
+    the fingers squeezed it on its support and it slipped out, a grasp that never took."""
+    closed = ev.gripper_command > 0
+    lift = ev.col("lift", obj)
+    return e < len(ev) and bool(closed[e - 1] and closed[e]) and float(lift[s:e].max() - lift[s]) < th.lift_m
 
 
 def closes(ev: Evidence, th: Thresholds) -> list[tuple[int, int]]:
@@ -139,7 +153,7 @@ def closes(ev: Evidence, th: Thresholds) -> list[tuple[int, int]]:
 
 def grasp_missed(ev: Evidence, th: Thresholds) -> list[SimEvent]:
     out = []
-    starts = [s for s, _, _ in holds(ev, th)]
+    starts = [s for s, e, o in holds(ev, th) if not unlifted_slip(ev, th, s, e, o)]
     parts = operated(ev)
     touching_part = np.zeros(len(ev), bool)
     for p in parts:
@@ -161,11 +175,8 @@ def grasp_lost_and_dropped(ev: Evidence, th: Thresholds) -> list[SimEvent]:
     n = len(ev)
     all_holds = holds(ev, th)
     for s, e, obj in all_holds:
-        if e >= n:
-            continue
-        held = np.array([g == obj for g in ev.grasped])
-        if held[e : e + th.min_run].any():
-            continue  # flicker, the grasp resumes
+        if e >= n or unlifted_slip(ev, th, s, e, obj):
+            continue  # still held at the end, or a grasp that never took (grasp_missed)
         lift = ev.col("lift", obj)
         window = slice(e, min(n, e + th.drop_window))
         fell = float(lift[e - 1] - lift[window].min())

@@ -42,10 +42,35 @@ def test_a_grasp_that_slips_while_still_closed_is_grasp_lost():
     ev = make_evidence()
     ev.gripper_command[10:] = 1.0
     ev.grasped[12:30] = ["bowl_1"] * 18
+    ev.per_object["lift"]["bowl_1"][16:30] = 0.02  # it had left the table
     for t in range(30, 60):
         ev.contacts[t] = ["bowl_1|table"]
     [e] = grasp_lost_and_dropped(ev, TH)
     assert (e.kind, e.step) == ("grasp_lost", 30)
+
+
+def test_a_squeeze_that_never_lifts_and_slips_out_closed_is_a_missed_grasp_at_the_close():
+    ev = make_evidence()
+    ev.per_object["eef_distance"]["bowl_1"][:] = 0.03
+    ev.gripper_command[10:50] = 1.0
+    ev.grasped[20:26] = ["bowl_1"] * 6  # in hand, a one-state flicker, in hand again: one hold
+    ev.grasped[27:35] = ["bowl_1"] * 8
+    ev.per_object["lift"]["bowl_1"][20:35] = 0.003  # never left the table
+    assert grasp_lost_and_dropped(ev, TH) == []
+    [e] = grasp_missed(ev, TH)
+    assert (e.kind, e.step, e.object) == ("grasp_missed", 10, "bowl_1")
+
+
+def test_a_one_state_touch_after_the_release_does_not_hide_the_release():
+    ev = make_evidence()
+    ev.gripper_command[10:40] = 1.0
+    ev.grasped[12:42] = ["bowl_1"] * 30
+    ev.grasped[43] = "bowl_1"  # a finger brushes it once as it settles
+    ev.per_object["lift"]["bowl_1"][12:42] = 0.05
+    for t in range(44, 60):
+        ev.contacts[t] = ["bowl_1|table"]
+    [e] = grasp_lost_and_dropped(ev, TH)
+    assert (e.kind, e.step) == ("object_misplaced", 40)
 
 
 def test_an_unsupported_release_that_falls_is_a_drop_at_the_open_command():
