@@ -81,7 +81,7 @@ class Thresholds:
     min_run: int = 3  # steps a state must last to count (filters one-step flicker)
     merge_gap: int = 8  # closed runs apart by fewer open steps are one close (command flicker)
     hold_steps: int = 6  # states in hand that make a hold (fewer: brushing, a pinch that slips)
-    lift_m: float = 0.01  # a hold that never raised its object this much and slipped out closed was no grasp
+    lift_m: float = 0.005  # a hold that never raised its object this much and slipped out closed: no grasp
     drop_window: int = 30
     drop_m: float = 0.03
     topple_deg: float = 45.0
