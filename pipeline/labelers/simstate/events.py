@@ -36,8 +36,9 @@ Rules:
 - object_toppled: an object not held, and not held in the last `drop_window` steps (a
   release or a slip that tips it is that event, an object tipping over inside its
   container is no failure), tilts >= `topple_deg` from its start orientation, and was not
-  held since it began tipping. Step: the last step its tilt was still <= `tilt_start_deg`,
-  plus one.
+  held since it began tipping. A target that goes over while a close near it is under way
+  is that grasp attempt's failure (grasp_missed / grasp_lost), not a topple. Step: the last
+  step its tilt was still <= `tilt_start_deg`, plus one.
 - unintended_displacement: an object moves >= `displace_m` from its start (a target or a
   reference >= `own_displace_m`: a nudge on the way to a grasp that then holds, or a
   basket nudged by what is put into it, is no failure) before it is first held; a target's
@@ -198,6 +199,11 @@ def grasp_lost_and_dropped(ev: Evidence, th: Thresholds) -> list[SimEvent]:
 
 def toppled(ev: Evidence, th: Thresholds) -> list[SimEvent]:
     out = []
+    grasping = {o: np.zeros(len(ev), bool) for o in ev.targets}  # a close near the target under way
+    for s, e in closes(ev, th):
+        for o in grasping:
+            if o in ev.objects and ev.col("eef_distance", o)[s] <= th.near_m:
+                grasping[o][s:e] = True
     for obj in ev.objects:
         tilt = ev.col("tilt_deg", obj)
         held = np.array([g == obj for g in ev.grasped])
@@ -209,6 +215,8 @@ def toppled(ev: Evidence, th: Thresholds) -> list[SimEvent]:
             step = int(calm[-1]) + 1 if len(calm) else 0
             if held[step:k].any():
                 continue  # it began tipping in the hand: the release or slip is the event
+            if obj in grasping and grasping[obj][k]:
+                continue  # it went over while the fingers closed on it: that grasp is the event
             out.append(_ev(ev, step, "object_toppled", obj, detail=f"tilted {tilt[k]:.0f} deg"))
     return out
 

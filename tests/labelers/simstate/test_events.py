@@ -203,3 +203,22 @@ def test_an_object_that_began_tipping_in_the_hand_is_no_topple():
     ev.per_object["tilt_deg"]["cup_1"][15:] = 20.0  # tilted while held
     ev.per_object["tilt_deg"]["cup_1"][55:] = 60.0  # lies on its side long after the release
     assert toppled(ev, TH) == []
+
+
+def test_a_target_that_goes_over_while_the_fingers_close_on_it_is_that_grasp_not_a_topple():
+    ev = make_evidence()
+    ev.per_object["eef_distance"]["bowl_1"][:] = 0.05
+    ev.gripper_command[30:50] = 1.0
+    ev.per_object["tilt_deg"]["bowl_1"][20:] = [min(80, 3 * (t - 19)) for t in range(20, 60)]  # 45 deg at 34
+    assert toppled(ev, TH) == []
+    [e] = detect_events(ev)
+    assert (e.kind, e.step) == ("grasp_missed", 30)
+
+
+def test_a_target_knocked_over_before_the_fingers_close_is_a_topple():
+    ev = make_evidence()
+    ev.per_object["eef_distance"]["bowl_1"][:] = 0.05
+    ev.gripper_command[45:55] = 1.0
+    ev.per_object["tilt_deg"]["bowl_1"][20:] = [min(80, 5 * (t - 19)) for t in range(20, 60)]  # 45 deg at 28
+    [e] = toppled(ev, TH)
+    assert (e.kind, e.step, e.object) == ("object_toppled", 22, "bowl_1")
