@@ -24,14 +24,17 @@ Rules:
   the gripper is still commanded closed, after it had raised the object >= `lift_m`.
   Step: the first ungrasped step.
 - object_dropped: a hold ends while the object is supported by nothing but the robot, and
-  within `drop_window` steps it falls >= `drop_m`, and goal progress does not rise within
+  within `drop_window` steps it falls >= `drop_m`, and goal progress does not rise (for >=
+  `min_run` states above its level when the hold began or ended, whichever is lower: a
+  predicate flickering true once is no progress) within
   2 * `drop_window` steps, nor before the next hold begins (a release into a basket that
   lands there is a placement). Step: the open
   command that released it (if within `grasp_window` steps before), else the release.
 - object_misplaced: a hold of a target ends after an open command (within `grasp_window`
   steps before the hold ends) and is no drop (it was set down on something, or fell less
-  than `drop_m`), and goal progress does not rise within 2 * `drop_window` steps nor
-  before the next hold begins: the target was let go where the goal does not want it.
+  than `drop_m`), and goal progress does not rise (as for a drop) within 2 * `drop_window`
+  steps nor before the next hold begins: the target was let go where the goal does not
+  want it.
   Step: that open command (the release at the wrong place).
 - object_toppled: an object not held, and not held in the last `drop_window` steps (a
   release or a slip that tips it is that event, an object tipping over inside its
@@ -44,7 +47,9 @@ Rules:
   basket nudged by what is put into it, is no failure) before it is first held; a target's
   motion only counts before the first close near it (the closing fingers moving it are the
   grasp). Step: the first step of that motion (displacement
-  >= `motion_m`).
+  >= `motion_m`); when the robot was touching it then (contacts apart by fewer than
+  `merge_gap` steps joined), the first step of that touch on which it had moved >=
+  `motion_m` (a push jiggles the object in place before it slides).
 - robot_contact_non_target: the robot touches an object that is neither a target nor a
   reference and moves it >= `displace_m` meanwhile (a touch that moves nothing is no
   failure), or a fixture that is neither for >= `fixture_contact_steps`. Step: first
@@ -184,7 +189,9 @@ def grasp_lost_and_dropped(ev: Evidence, th: Thresholds) -> list[SimEvent]:
         supported = any(c.startswith(f"{obj}|") or c.endswith(f"|{obj}") for c in ev.contacts[e - 1]
                         if "robot" not in c.split("|"))
         nxt = next((h for h, _, _ in all_holds if h > e), n)
-        progressed = ev.goal_progress[e:max(e + 1, min(nxt, e + 2 * th.drop_window))].max() > ev.goal_progress[e - 1]
+        base = min(ev.goal_progress[s], ev.goal_progress[e - 1])  # a predicate true in the hand is no placement yet
+        after = ev.goal_progress[e:max(e + 1, min(nxt, e + 2 * th.drop_window))] > base + 1e-6
+        progressed = any(b - a >= th.min_run or b == len(after) for a, b in _runs(after))  # not a 1-state flicker
         opens = [t for t in range(max(s, e - th.grasp_window), e) if not closed[t] and (t == 0 or closed[t - 1])]
         if fell >= th.drop_m and not supported and not progressed:
             out.append(_ev(ev, opens[-1] if opens else e, "object_dropped", obj,
@@ -238,6 +245,9 @@ def displaced(ev: Evidence, th: Thresholds) -> list[SimEvent]:
             k = int(far[0])
             still = np.flatnonzero(disp[:k] < th.motion_m)
             step = int(still[-1]) + 1 if len(still) else 0
+            touch = [r for r in _merged(_pair_mask(ev, obj, "robot"), th.merge_gap) if r[0] <= k <= r[1]]
+            if touch:  # pushed: it jiggles in place under the hand before it slides
+                step = min(step, touch[0][0] + int(np.argmax(disp[touch[0][0]:k + 1] >= th.motion_m)))
             out.append(_ev(ev, step, EventKind.unintended_displacement, obj, detail=f"moved {disp[k]:.3f} m without a grasp"))
     return out
 

@@ -222,3 +222,27 @@ def test_a_target_knocked_over_before_the_fingers_close_is_a_topple():
     ev.per_object["tilt_deg"]["bowl_1"][20:] = [min(80, 5 * (t - 19)) for t in range(20, 60)]  # 45 deg at 28
     [e] = toppled(ev, TH)
     assert (e.kind, e.step, e.object) == ("object_toppled", 22, "bowl_1")
+
+
+def test_a_pushed_bystander_is_displaced_from_the_first_motion_under_the_hand_not_its_last_rest():
+    ev = make_evidence()
+    for t in range(10, 40):
+        ev.contacts[t] = ["cup_1|robot"]
+    jiggle = ev.per_object["displacement"]["cup_1"]
+    jiggle[12:30] = [0.004, 0.002] * 9  # wobbles in place under the hand, back below motion_m
+    jiggle[30:] = 0.03  # then slides
+    [e] = [x for x in detect_events(ev) if x.kind == "unintended_displacement"]
+    assert (e.object, e.step) == ("cup_1", 12)
+
+
+def test_a_goal_predicate_flickering_true_once_after_a_release_is_no_placement():
+    ev = make_evidence()
+    ev.gripper_command[10:40] = 1.0
+    ev.grasped[12:42] = ["bowl_1"] * 30
+    for t in range(42, 60):
+        ev.contacts[t] = ["bowl_1|table"]
+    ev.goal_progress[45] = 1.0  # one state
+    [e] = grasp_lost_and_dropped(ev, TH)
+    assert (e.kind, e.step) == ("object_misplaced", 40)
+    ev.goal_progress[45:] = 1.0  # it stays: placed
+    assert grasp_lost_and_dropped(ev, TH) == []
