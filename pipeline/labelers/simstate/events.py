@@ -17,7 +17,8 @@ Rules:
 - grasp_missed: a close (>= `min_run` steps) with the grip site within `near_m` of an
   object (the nearest target if one is that near, else the nearest object), during which no
   hold begins and the robot touches no operated fixture (gripping a knob or pushing a
-  drawer with a fist is not a grasp). A hold that never raised its object >= `lift_m` and
+  drawer with a fist is not a grasp; a close that held an object was a grasp, even if the
+  hand brushed a fixture). A hold that never raised its object >= `lift_m` and
   ended with the gripper still closed (squeezed on its support, it slipped out) is no
   grasp either. Step: the first closed step. Object: that object.
 - grasp_lost: a hold (runs in hand apart by fewer than `min_run` states are one) ends while
@@ -87,7 +88,8 @@ class Thresholds:
     min_run: int = 3  # steps a state must last to count (filters one-step flicker)
     merge_gap: int = 8  # closed runs apart by fewer open steps are one close (command flicker)
     hold_steps: int = 6  # states in hand that make a hold (fewer: brushing, a pinch that slips)
-    lift_m: float = 0.005  # a hold that never raised its object this much and slipped out closed: no grasp
+    lift_m: float = 0.003  # a hold that never raised its object this much (its first motion, as motion_m)
+    # and slipped out of the closed fingers was no grasp
     drop_window: int = 30
     drop_m: float = 0.03
     topple_deg: float = 45.0
@@ -159,7 +161,8 @@ def closes(ev: Evidence, th: Thresholds) -> list[tuple[int, int]]:
 
 def grasp_missed(ev: Evidence, th: Thresholds) -> list[SimEvent]:
     out = []
-    starts = [s for s, e, o in holds(ev, th) if not unlifted_slip(ev, th, s, e, o)]
+    all_holds = holds(ev, th)
+    starts = [s for s, e, o in all_holds if not unlifted_slip(ev, th, s, e, o)]
     parts = operated(ev)
     touching_part = np.zeros(len(ev), bool)
     for p in parts:
@@ -168,7 +171,9 @@ def grasp_missed(ev: Evidence, th: Thresholds) -> list[SimEvent]:
         dist = {o: float(ev.col("eef_distance", o)[s]) for o in ev.objects}
         near_targets = [o for o in ev.targets if o in dist and dist[o] <= th.near_m]
         near = min(near_targets or dist, key=dist.get) if dist else None
-        if near is None or dist[near] > th.near_m or any(s <= h < e for h in starts) or touching_part[s:e].any():
+        squeezed = any(s <= h < e for h, _, _ in all_holds)  # it held an object: a grasp, not a fist on a part
+        if near is None or dist[near] > th.near_m or any(s <= h < e for h in starts) or \
+                (touching_part[s:e].any() and not squeezed):
             continue
         out.append(_ev(ev, s, "grasp_missed", near, detail=f"closed {dist[near]:.3f} m from {near}'s origin, "
                                                             "nothing held"))

@@ -246,3 +246,16 @@ def test_a_goal_predicate_flickering_true_once_after_a_release_is_no_placement()
     assert (e.kind, e.step) == ("object_misplaced", 40)
     ev.goal_progress[45:] = 1.0  # it stays: placed
     assert grasp_lost_and_dropped(ev, TH) == []
+
+
+def test_a_close_that_squeezed_an_object_beside_a_drawer_is_a_missed_grasp_not_a_fist_on_the_drawer():
+    ev = make_evidence(goal=(("open", "cabinet_1"), ("in", "bowl_1", "cabinet_1")), fixtures=("cabinet_1",))
+    ev.per_object["eef_distance"]["bowl_1"][:] = 0.05
+    ev.gripper_command[10:50] = 1.0
+    ev.grasped[20:28] = ["bowl_1"] * 8  # squeezed in the drawer, never raised, slipped out
+    for t in range(28, 40):
+        ev.contacts[t] = ["cabinet_1|robot"]  # the closing hand then pressed on the drawer
+    [e] = grasp_missed(ev, TH)
+    assert (e.step, e.object) == (10, "bowl_1")
+    ev.grasped[20:28] = [""] * 8  # nothing held: a fist on the drawer, no grasp attempt
+    assert grasp_missed(ev, TH) == []
