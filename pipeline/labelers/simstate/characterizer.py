@@ -23,8 +23,9 @@ event within 1 s): grasp_missed / grasp_lost -> grasp_failure; object_dropped ->
 placement_failure if released within PLACE_NEAR_M of its own reference (the one its
 conjunct names) or landing on it within LAND_STEPS, else grasp_failure (a drop in transit);
 object_misplaced -> placement_failure; object_toppled / unintended_displacement ->
-object_displacement when it is the target, collision_or_interaction_failure for another object; goal_regression (something achieved
-undone, a drawer bumped shut) -> collision_or_interaction_failure; robot_contact_non_target
+object_displacement when it is the target, collision_or_interaction_failure for another
+object; goal_regression (something achieved undone, a drawer bumped shut) ->
+collision_or_interaction_failure; robot_contact_non_target
 -> environmental_obstruction for a fixture, collision_or_interaction_failure for an object;
 object_collision, part_not_operated -> collision_or_interaction_failure; no event -> other.
 Action: `pipeline.labelers.simstate.wording.recovery_action` for the object the onset event

@@ -46,9 +46,10 @@ Rules:
   reference >= `own_displace_m`: a nudge on the way to a grasp that then holds, or a
   basket nudged by what is put into it, is no failure) before it is first held; a target's
   motion only counts before the first close near it (the closing fingers moving it are the
-  grasp). Step: the first step of that motion (displacement >= `motion_m`); when the robot was touching it then (contacts apart by fewer than
-  `merge_gap` steps joined), the first step of that touch on which it had moved >=
-  `motion_m` (a push jiggles the object in place before it slides).
+  grasp). Step: the first step of that motion (displacement >= `motion_m`); when the robot
+  was touching it then (contacts apart by fewer than `merge_gap` steps joined), the first
+  step of that touch on which it had moved >= `motion_m` (a push jiggles the object in
+  place before it slides).
 - robot_contact_non_target: the robot touches an object that is neither a target nor a
   reference and moves it >= `displace_m` meanwhile (a touch that moves nothing is no
   failure), or a fixture that is neither for >= `fixture_contact_steps`. Step: first
