@@ -124,6 +124,7 @@ def main() -> None:
                 [sys.executable, __file__, "--reps", str(args.reps), "--child", str(folder), keys[name], json.dumps(opts)],
                 env={**os.environ, **env_vars}, capture_output=True, text=True, check=True)
             runs[name].append(json.loads(out.stdout.strip().splitlines()[-1]))
+            print(f"  {name:<34} render {runs[name][-1]['render_ms']:6.1f} ms", flush=True)
     base = np.load(folder / f"frames-{keys['default (fast, culled)']}.npy").astype(np.int16)
     ref = np.median([r["render_ms"] for r in runs["default (fast, culled)"]])
     print(f"CPU ms per frame (median of {args.rounds} rounds; 1 frame = 1 camera), pixel difference vs the default:")
