@@ -11,6 +11,11 @@ from pipeline.policies.scripted.scene import Scene
 OFF_TABLE_M = 0.06  # a body this far below the table top has fallen off it
 REACH_M = 0.95  # horizontal reach from the robot base the arm can still grasp at
 JOINT_MARGIN = 0.15  # radians from a joint limit that count as an awkward pose
+# the elbow (joint 4) this close to its straight limit: the arm is near full reach, and
+# raising the hand straight up stretches it into the limit, a singular pose from which the
+# controller can no longer pull the hand back (measured: stuck 80 steps, 20 cm short of home)
+ELBOW_STRAIGHT = 0.4
+ELBOW_LOCKED = 0.06  # ... and this close it is locked: only tilting the hand bends it again
 SAFE_Z = 0.16  # grip site above the table top from which any approach may start
 # comfortable region of the grip site (x, y), relative to the robot base
 HOME_XY = np.array([0.45, 0.0])
@@ -58,6 +63,29 @@ def awkward_arm(scene: Scene) -> bool:
     if np.any(rel < COMFORT_XY[0]) or np.any(rel > COMFORT_XY[1]):
         return True
     return float(-rot[2, 2]) < np.cos(np.radians(25))  # grip axis more than 25 deg off vertical
+
+
+def _elbow_slack(scene: Scene) -> float:
+    """Radians the elbow (joint 4) can still straighten before its limit."""
+    sim = scene.env.env.sim
+    m = sim.model
+    j = m.joint_name2id("robot0_joint4")
+    return float(m.jnt_range[j][1] - sim.data.qpos[m.jnt_qposadr[j]])
+
+
+def elbow_straight(scene: Scene) -> bool:
+    return _elbow_slack(scene) < ELBOW_STRAIGHT
+
+
+def elbow_locked(scene: Scene) -> bool:
+    return _elbow_slack(scene) < ELBOW_LOCKED
+
+
+def toward_base(scene: Scene, dist: float) -> np.ndarray:
+    """Horizontal step of `dist` metres from the grip site toward the robot base."""
+    d = robot_base(scene)[:2] - scene.eef()[:2]
+    n = float(np.linalg.norm(d))
+    return np.zeros(3) if n < 1e-6 else np.array([*(d / n * dist), 0.0])
 
 
 def arm_in_contact(scene: Scene, held: str | None) -> bool:

@@ -22,7 +22,7 @@ from pipeline.policies.scripted import articulated
 from pipeline.policies.scripted.grasps import plan_grasp
 from pipeline.policies.scripted.planner import order_goal
 from pipeline.policies.scripted.recovery import checks
-from pipeline.policies.scripted.recovery.back_out import back_out
+from pipeline.policies.scripted.recovery.back_out import back_out, let_go
 from pipeline.policies.scripted.recovery.operate import operate_once
 from pipeline.policies.scripted.recovery.pick_place import pick_place_once
 from pipeline.policies.scripted.recovery.put_aside import put_aside
@@ -85,7 +85,7 @@ def recover(ctx: Ctx, now: Callable[[], int], budget: int | None) -> Plan:
             yield from put_aside(ctx, held, aside[held] - 1)
             continue
         if held is None and not s.gripper_open():
-            yield from free_hand(ctx)
+            yield from let_go(ctx)
         yield from back_out(ctx)
         if sub[0] in ("on", "in") and held != sub[1]:
             dest = destination(ctx, sub[1], sub[2])
