@@ -31,7 +31,7 @@ def let_go(ctx: Ctx) -> Plan:
 
 def back_out(ctx: Ctx) -> Plan:
     s = ctx.scene
-    held = s.holding_any()
+    held = checks.held(s)
     grip = 1.0 if held else -1.0
     if checks.arm_in_contact(s, held) or checks.low_hand(s):
         eef = s.eef()

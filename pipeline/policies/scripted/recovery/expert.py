@@ -19,6 +19,7 @@ from pipeline.policies.scripted.skills import Ctx, Plan
 from pipeline.policies.scripted.truth import TruthLog
 from pipeline.sim import TaskSpec
 
+STUCK_M = 0.004  # grip-site travel over one chunk below which a Move counts as stuck
 UNLOCK_STEPS = 4  # steps per unlocking chunk (re-checked after each)
 UNLOCK_TILT = 0.5  # rotation action (x 0.5 rad) about the horizontal axis that tilts the hand
 
@@ -32,19 +33,25 @@ class RecoveryExpert(ScriptedPolicy):
         self.give_up_reason: GiveUpReason | None = None
         self.give_up_detail = ""
         self._now = 0
+        self._eef = None
 
     def reset(self, task: TaskSpec, seed: int) -> None:
         super().reset(task, seed)
         self.give_up_reason = None
         self.give_up_detail = ""
         self._now = 0
+        self._eef = None
 
     def act(self, obs):
         self._now = obs.step
+        prev = self._prim
         chunk = super().act(obs)
-        if isinstance(self._prim, Move) and checks.elbow_locked(self._ctx.scene):
-            chunk = self._unlock(chunk)
-        return chunk
+        eef = obs.sim.eef_pose()[0]
+        # a Move that made no progress over its last chunk with the elbow locked: unlock it
+        stuck = (isinstance(self._prim, Move) and self._prim is prev and self._eef is not None
+                 and float(np.linalg.norm(eef - self._eef)) < STUCK_M and checks.elbow_locked(self._ctx.scene))
+        self._eef = eef
+        return self._unlock(chunk) if stuck else chunk
 
     def _unlock(self, chunk: np.ndarray) -> np.ndarray:
         """A few steps that tilt the hand toward the robot base while still moving toward the
@@ -73,7 +80,7 @@ class RecoveryExpert(ScriptedPolicy):
             ctx.events.append(f"give_up:{e.reason}")
         s = ctx.scene
         while True:  # done or given up: hold still
-            yield Move(target=s.eef(), gripper=-1.0 if s.holding_any() is None else 1.0, tol=-1.0,
+            yield Move(target=s.eef(), gripper=-1.0 if checks.held(s) is None else 1.0, tol=-1.0,
                        max_steps=10**9, yaw=ctx.yaw_hold, label="idle")
 
     def reason_after(self, success: bool) -> GiveUpReason | None:

@@ -52,7 +52,7 @@ def next_subgoal(ctx: Ctx, steps: list[tuple[str, ...]], goal: list[tuple[str, .
             # an implied open: only while something must still go in
             if any(g[0] == "in" and not s.satisfied(g) and articulated.openable(s.env, g[2]) == c[1] for g in goal):
                 todo.append(c)
-    held = s.holding_any()
+    held = checks.held(s)
     for c in todo:
         if c[0] in ("on", "in") and c[1] == held:
             return c
@@ -77,7 +77,7 @@ def recover(ctx: Ctx, now: Callable[[], int], budget: int | None) -> Plan:
         hopeless = checks.hopeless(s, movers)
         if hopeless is not None:
             raise GiveUp(*hopeless)
-        held = s.holding_any()
+        held = checks.held(s)
         if held is not None and not (sub[0] in ("on", "in") and sub[1] == held):
             aside[held] += 1
             if aside[held] > MAX_ASIDE + 1:
