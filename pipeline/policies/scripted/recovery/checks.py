@@ -12,7 +12,7 @@ OFF_TABLE_M = 0.06  # a body this far below the table top has fallen off it
 REACH_M = 0.95  # horizontal reach from the robot base the arm can still grasp at
 # ... and the nearest: closer in, the folded arm hits itself or the base before the palm
 # gets down (measured: a book fallen against the base, 0.28 m out, missed 3 of 3 grasps)
-MIN_REACH_M = 0.3
+MIN_REACH_M = 0.25  # (to the object's nearest edge)
 JOINT_MARGIN = 0.15  # radians from a joint limit that count as an awkward pose
 # the elbow (joint 4) this close to its straight limit: the arm is near full reach, and
 # raising the hand straight up stretches it into the limit, a singular pose from which the
@@ -48,8 +48,10 @@ def hopeless(scene: Scene, objects: list[str]) -> tuple[GiveUpReason, str] | Non
         r = float(np.linalg.norm(p[:2] - base[:2]))
         if r > REACH_M:
             return GiveUpReason.UNREACHABLE, f"{o} {r:.2f} m from the robot base"
-        if r < MIN_REACH_M and scene.holding_any() == o and held(scene) is None:
-            return GiveUpReason.UNREACHABLE, f"{o} lies against the robot, {r:.2f} m from its base"
+        b = scene.box(o)
+        near = float(np.linalg.norm(np.clip(base[:2], b.lo[:2], b.hi[:2]) - base[:2]))
+        if near < MIN_REACH_M and scene.holding_any() == o and held(scene) is None:
+            return GiveUpReason.UNREACHABLE, f"{o} lies against the robot, {near:.2f} m from its base"
     return None
 
 
