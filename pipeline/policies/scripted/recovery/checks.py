@@ -183,6 +183,22 @@ def drawer_sweep(scene: Scene, joint: str) -> np.ndarray | None:
     return np.array([np.minimum(lo, lo + shift), np.maximum(hi, hi + shift)])
 
 
+def proud_in_drawer(scene: Scene, joint: str, margin: float = 0.01) -> list[str]:
+    """Objects standing in the drawer of a slide `joint` whose top rises above its walls (a
+    bowl leaning on the front wall): closing the drawer jams them against the cabinet."""
+    if scene.env.joint_frame(joint)["kind"] != "slide":
+        return []
+    boxes = scene.env.joint_part_boxes(joint)
+    lo, hi = boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0)
+    out = []
+    for o in scene.env.object_names:
+        b = scene.box(o)
+        inside = np.all(b.centre[:2] > lo[:2]) and np.all(b.centre[:2] < hi[:2]) and lo[2] - 0.02 < b.lo[2] < hi[2]
+        if inside and b.hi[2] > hi[2] + margin:
+            out.append(o)
+    return out
+
+
 def under_sweep(scene: Scene, obj: str, sweep: np.ndarray, margin: float = 0.05) -> bool:
     """The opened drawer would overhang `obj` (or the hand grasping it, `margin`)."""
     b = scene.box(obj)

@@ -18,6 +18,8 @@ import os
 from collections import Counter
 from collections.abc import Callable
 
+import numpy as np
+
 from pipeline.policies.scripted import articulated
 from pipeline.policies.scripted.grasps import plan_grasp
 from pipeline.policies.scripted.planner import order_goal
@@ -30,6 +32,7 @@ from pipeline.policies.scripted.recovery.reasons import GiveUp, GiveUpReason
 from pipeline.policies.scripted.recovery.variation import RetryNoise
 from pipeline.policies.scripted.skills import Ctx, Plan, destination, free_hand
 
+OPEN_FULL = 0.85  # a drawer this far open (of its range) lets a hand reach all of its inside
 MAX_TRIES = 4  # attempts per subgoal (each one different)
 MAX_ASIDE = 2
 FLAT_M = 0.04  # objects lower than this are grasped with the palm near the table  # times one obstruction is moved aside
@@ -109,6 +112,26 @@ def recover(ctx: Ctx, now: Callable[[], int], budget: int | None) -> Plan:
                 _debug("aside before opening", under)
                 aside[under[0]] += 1
                 yield from put_aside(ctx, under[0], aside[under[0]] - 1, forbid=[sweep])
+                continue
+        if sub[0] == "close" and tries[sub] > 0 and (joint := articulated.part_joint(s.env, sub[1])) is not None:
+            # after a failed push: an object sticking up out of the drawer jams it; pull the
+            # drawer fully out, then put it in again (flat), or aside
+            proud = [o for o in checks.proud_in_drawer(s, joint) if aside[o] < MAX_ASIDE]
+            if proud:
+                _debug("re-place before closing", proud)
+                o = proud[0]
+                aside[o] += 1
+                again = next((g for g in goal if g[0] == "in" and g[1] == o), None)
+                fr = s.env.joint_frame(joint)
+                if abs(fr["qpos"]) < OPEN_FULL * float(np.max(np.abs(fr["range"]))):
+                    # the part of it under the cabinet cannot be reached from above: pull it out
+                    _debug("open fully first", joint)
+                    yield from articulated._pull_drawer(ctx, joint)
+                    continue
+                if again is not None:
+                    yield from pick_place_once(ctx, again, aside[o])
+                else:
+                    yield from put_aside(ctx, o, aside[o] - 1)
                 continue
         if tries[sub] >= MAX_TRIES:
             raise GiveUp(GiveUpReason.RETRIES_EXHAUSTED, f"{' '.join(sub)} failed {MAX_TRIES} times")
