@@ -21,6 +21,7 @@ from pipeline.sim import TaskSpec
 
 STUCK_M = 0.004  # grip-site travel over one chunk below which a Move counts as stuck
 UNLOCK_STEPS = 4  # steps per unlocking chunk (re-checked after each)
+UNLOCK_MAX = 24  # most steps of one unlocking
 UNLOCK_TILT = 0.5  # rotation action (x 0.5 rad) about the horizontal axis that tilts the hand
 
 
@@ -34,6 +35,7 @@ class RecoveryExpert(ScriptedPolicy):
         self.give_up_detail = ""
         self._now = 0
         self._eef = None
+        self._unlocking = 0
 
     def reset(self, task: TaskSpec, seed: int) -> None:
         super().reset(task, seed)
@@ -41,6 +43,7 @@ class RecoveryExpert(ScriptedPolicy):
         self.give_up_detail = ""
         self._now = 0
         self._eef = None
+        self._unlocking = 0
 
     def act(self, obs):
         self._now = obs.step
@@ -51,7 +54,14 @@ class RecoveryExpert(ScriptedPolicy):
         stuck = (isinstance(self._prim, Move) and self._prim is prev and self._eef is not None
                  and float(np.linalg.norm(eef - self._eef)) < STUCK_M and checks.elbow_locked(self._ctx.scene))
         self._eef = eef
-        return self._unlock(chunk) if stuck else chunk
+        # once unlocking, go on until the elbow is well bent (or UNLOCK_MAX steps): a short
+        # tilt is undone by the next chunks' turning the hand back, and the elbow locks again
+        if stuck or (0 < self._unlocking < UNLOCK_MAX and isinstance(self._prim, Move)
+                     and checks.elbow_straight(self._ctx.scene)):
+            self._unlocking += UNLOCK_STEPS
+            return self._unlock(chunk)
+        self._unlocking = 0
+        return chunk
 
     def _unlock(self, chunk: np.ndarray) -> np.ndarray:
         """A few steps that tilt the hand toward the robot base while still moving toward the
