@@ -30,7 +30,7 @@ from pipeline.policies.scripted.recovery.pick_place import pick_place_once
 from pipeline.policies.scripted.recovery.put_aside import put_aside
 from pipeline.policies.scripted.recovery.reasons import GiveUp, GiveUpReason
 from pipeline.policies.scripted.recovery.variation import RetryNoise
-from pipeline.policies.scripted.skills import Ctx, Plan, destination, free_hand
+from pipeline.policies.scripted.skills import Ctx, Plan, destination
 
 OPEN_FULL = 0.85  # a drawer this far open (of its range) lets a hand reach all of its inside
 MAX_TRIES = 4  # attempts per subgoal (each one different)
