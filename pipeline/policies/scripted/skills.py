@@ -160,6 +160,14 @@ def destination(ctx: Ctx, obj: str, target: str) -> np.ndarray:
 
 
 def place(ctx: Ctx, obj: str, target: str) -> Plan:
+    # a book into a narrow compartment goes in turned and lowered its own way (slot.py;
+    # imported here because it builds on this module's `travel`)
+    from pipeline.policies.scripted.slot import place_in_slot, slot_alignment
+
+    angle = slot_alignment(ctx, obj, target)
+    if angle is not None:
+        yield from place_in_slot(ctx, obj, target, angle)
+        return
     yield from place_at(ctx, obj, place_xy(ctx, obj, target), support_ceiling(ctx.scene.env, target))
 
 
