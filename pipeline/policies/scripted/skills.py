@@ -160,10 +160,16 @@ def destination(ctx: Ctx, obj: str, target: str) -> np.ndarray:
 
 
 def place(ctx: Ctx, obj: str, target: str) -> Plan:
-    # a book into a narrow compartment goes in turned and lowered its own way (slot.py;
+    # a book into a narrow compartment or a roofed shelf goes in its own way (slot.py,
+    # shelf.py;
     # imported here because it builds on this module's `travel`)
+    from pipeline.policies.scripted.shelf import shelf_opening, slide_into_shelf
     from pipeline.policies.scripted.slot import place_in_slot, slot_alignment
 
+    into = shelf_opening(ctx, obj, target)
+    if into is not None:
+        yield from slide_into_shelf(ctx, obj, target, into)
+        return
     angle = slot_alignment(ctx, obj, target)
     if angle is not None:
         yield from place_in_slot(ctx, obj, target, angle)

@@ -48,6 +48,12 @@ def _region_box(env, target: str) -> tuple[np.ndarray, np.ndarray]:
     return r["pos"], np.abs(r["mat"]) @ r["size"]
 
 
+def has_roof(env, target: str, obj: str) -> bool:
+    """Something lies above the region's middle height over its centre (a shelf's roof)."""
+    centre, _ = _region_box(env, target)
+    return env.ray_down(centre[:2], centre[2] + 0.6, centre[2], ignore=obj) is not None
+
+
 def slot_alignment(ctx: Ctx, obj: str, target: str) -> float | None:
     """World angle the slab's long axis must take to fit `target`, or None when this skill
     does not apply (see the module docstring)."""
@@ -56,8 +62,7 @@ def slot_alignment(ctx: Ctx, obj: str, target: str) -> float | None:
     if not env.is_region(target) or env.region(target)["joints"] or not is_upright_slab(s, obj):
         return None
     centre, half = _region_box(env, target)
-    roof = env.ray_down(centre[:2], centre[2] + 0.6, centre[2] + half[2] + 0.02, ignore=obj)
-    if roof is not None:
+    if has_roof(env, target, obj):
         return None
     _, length, thin, _ = footprint(env.object_corners(obj))
     options = []

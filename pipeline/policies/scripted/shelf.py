@@ -1,0 +1,101 @@
+"""Skill: slide a held book, laid flat, into a roofed shelf compartment from its open side.
+
+Input: a `Ctx` whose hand holds `obj` (an upright slab held near its top edge, see
+`grasps.is_upright_slab`) and a region `target` with a roof over it (a two-layer shelf's
+upper level: 13.5 cm between plank and roof, as tall as the book). Output: primitives that
+turn the hand so the fingers close along the way in, carry the book in front of the open
+side, tilt the hand to point into the shelf (the book then lies flat, its far end ahead of
+the fingers), push it in above the plank with the hand outside, release and back out.
+
+The Panda's palm reaches ~10 cm either way along the closing axis, which is vertical once
+tilted: the grip site stays PALM_HALF_M above the table. `shelf_opening` says whether this
+skill applies (an upright slab, a roofed region that is not a drawer, one open side).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pipeline.policies.scripted.grasps import is_upright_slab
+from pipeline.policies.scripted.primitives import Grip
+from pipeline.policies.scripted.slot import has_roof
+from pipeline.policies.scripted.skills import CARRY_CLEARANCE, Ctx, Plan, travel
+
+PALM_HALF_M = 0.115  # grip site above the table when the hand points sideways
+PLANK_GAP_M = 0.015  # book's lower face above the shelf floor while pushed in
+OUTSIDE_M = 0.012  # grip site this far outside the open face (fingers stay out)
+READY_M = 0.15  # grip site this far out before pushing in
+
+
+def _region_box(env, target: str) -> tuple[np.ndarray, np.ndarray]:
+    r = env.region(target)
+    return r["pos"], np.abs(r["mat"]) @ r["size"]
+
+
+def shelf_opening(ctx: Ctx, obj: str, target: str) -> np.ndarray | None:
+    """Unit horizontal direction pointing into the shelf through its open side, or None."""
+    s = ctx.scene
+    env = s.env
+    if not env.is_region(target) or env.region(target)["joints"] or not is_upright_slab(s, obj):
+        return None
+    centre, half = _region_box(env, target)
+    if not has_roof(env, target, obj):
+        return None  # open sky: not a shelf
+    try:
+        walls = env.object_boxes(env.region(target)["parent"])
+    except KeyError:
+        return None
+    base = env.env.sim.data.body_xpos[env.env.sim.model.body_name2id("robot0_base")][:2]
+    open_sides = []
+    for d in (np.array([1.0, 0, 0]), np.array([-1.0, 0, 0]), np.array([0, 1.0, 0]), np.array([0, -1.0, 0])):
+        face = centre + d * half
+        probes = [face + d * t for t in (0.004, 0.008, 0.012, 0.02)]
+        if not any(np.all(b[0] <= p) and np.all(p <= b[1]) for b in walls for p in probes):
+            open_sides.append(d)
+    if len(open_sides) != 1:
+        return None
+    d = open_sides[0]
+    # the way in must not point the hand back at the robot
+    if float(-d[:2] @ (centre[:2] - base)) < -0.05:
+        return None
+    return -d
+
+
+def slide_into_shelf(ctx: Ctx, obj: str, target: str, into: np.ndarray) -> Plan:
+    s = ctx.scene
+    env = s.env
+    centre, half = _region_box(env, target)
+    eef = s.eef()
+    box = s.box(obj)
+    across = np.array([-into[1], into[0], 0.0])
+    # yaw whose closing axis runs along `into` (either sign), the one nearer the current yaw
+    base_yaw = float(np.arctan2(-into[0], into[1]))
+    yaw = min((base_yaw, base_yaw - np.pi, base_yaw + np.pi), key=lambda y: abs(y - ctx.yaw_hold))
+    floor = s.support_top(centre[:2], 0.005, {obj}, below=centre[2] + half[2])
+    thin = 0.04  # upper bound of a slab's thickness (is_upright_slab)
+    z = max(floor + PLANK_GAP_M + thin / 2, s.table_height() + PALM_HALF_M)
+    open_face = float(centre[:2] @ into[:2]) - float(np.abs(half[:2]) @ np.abs(into[:2]))
+    # grip site: lateral = region centre, along the way in just outside the open face
+    lateral = float(centre[:2] @ across[:2])
+    inside = across * lateral + into * (open_face - OUTSIDE_M)
+    ready = across * lateral + into * (open_face - READY_M)
+    inside[2] = ready[2] = z
+    # carry upright to above the ready point (hand turned), then tilt there
+    hang = eef[2] - box.lo[2]  # the book hangs this far below the grip site while upright
+    up = ready.copy()
+    up[2] = max(z, s.table_height() + 0.03 + hang)
+    lift_z = s.path_clearance(eef, up, 0.5 * float(np.max(box.size[:2])), {obj}) + CARRY_CLEARANCE + hang
+    yield from travel(ctx, up, yaw, 1.0, max(lift_z, up[2]))
+    ctx.yaw_hold, ctx.approach_hold = yaw, into.copy()
+    yield ctx.move(ready + [0, 0, 0.03], gripper=1.0, speed=0.4, yaw=yaw, approach=into, tol=0.012, rot_tol=0.08,
+                   max_steps=80, label="tilt")
+    if s.holding_any() != obj:
+        ctx.events.append(f"dropped:{obj}")
+        ctx.approach_hold = None
+        return
+    yield ctx.move(ready, gripper=1.0, speed=0.4, yaw=yaw, approach=into, tol=0.008, max_steps=40, label="level")
+    yield ctx.move(inside, gripper=1.0, speed=0.3, yaw=yaw, approach=into, tol=0.008, max_steps=80, label="push_in")
+    yield Grip(-1.0, ctx.open_steps + 4, label="open")
+    yield ctx.move(s.eef() - into * 0.08, yaw=yaw, approach=into, tol=0.015, max_steps=30, label="back_out")
+    ctx.yaw_hold, ctx.approach_hold = 0.0, None
+    yield ctx.move(s.eef() + [0, 0, 0.06], tol=0.02, rot_tol=0.15, max_steps=40, label="untilt")
