@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.policies.scripted.grasps import is_upright_slab
+from pipeline.policies.scripted.grasps import SLAB_THIN_M, is_upright_slab
 from pipeline.policies.scripted.primitives import Grip
 from pipeline.policies.scripted.slot import has_roof
 from pipeline.policies.scripted.skills import CARRY_CLEARANCE, Ctx, Plan, travel
@@ -24,7 +24,7 @@ from pipeline.policies.scripted.skills import CARRY_CLEARANCE, Ctx, Plan, travel
 PALM_HALF_M = 0.115  # grip site above the table when the hand points sideways
 PLANK_GAP_M = 0.015  # book's lower face above the shelf floor while pushed in
 OUTSIDE_M = 0.012  # grip site this far outside the open face (fingers stay out)
-READY_M = 0.15  # grip site this far out before pushing in
+READY_M = 0.13  # grip site this far out before pushing in
 
 
 def _region_box(env, target: str) -> tuple[np.ndarray, np.ndarray]:
@@ -54,11 +54,25 @@ def shelf_opening(ctx: Ctx, obj: str, target: str) -> np.ndarray | None:
             open_sides.append(d)
     if len(open_sides) != 1:
         return None
+    lo, hi = _height_range(ctx, obj, target)
+    if lo > hi:
+        return None  # too low a gap for the tilted hand (under a shelf's plank)
     d = open_sides[0]
     # the way in must not point the hand back at the robot
     if float(-d[:2] @ (centre[:2] - base)) < -0.05:
         return None
     return -d
+
+
+def _height_range(ctx: Ctx, obj: str, target: str) -> tuple[float, float]:
+    """Lowest and highest grip-site height at which the flat book fits the gap and the
+    palm clears the table."""
+    s = ctx.scene
+    centre, half = _region_box(s.env, target)
+    floor = s.support_top(centre[:2], 0.005, {obj}, below=centre[2] + half[2])
+    thin = SLAB_THIN_M / 2  # half a slab's thickness at most (is_upright_slab)
+    lo = max(floor + PLANK_GAP_M + thin, s.table_height() + PALM_HALF_M)
+    return lo, centre[2] + half[2] - thin - 0.01
 
 
 def slide_into_shelf(ctx: Ctx, obj: str, target: str, into: np.ndarray) -> Plan:
@@ -71,9 +85,9 @@ def slide_into_shelf(ctx: Ctx, obj: str, target: str, into: np.ndarray) -> Plan:
     # yaw whose closing axis runs along `into` (either sign), the one nearer the current yaw
     base_yaw = float(np.arctan2(-into[0], into[1]))
     yaw = min((base_yaw, base_yaw - np.pi, base_yaw + np.pi), key=lambda y: abs(y - ctx.yaw_hold))
-    floor = s.support_top(centre[:2], 0.005, {obj}, below=centre[2] + half[2])
-    thin = 0.04  # upper bound of a slab's thickness (is_upright_slab)
-    z = max(floor + PLANK_GAP_M + thin / 2, s.table_height() + PALM_HALF_M)
+    lo, hi = _height_range(ctx, obj, target)
+    # high in the gap: the wrist, a hand's length behind, then passes over books standing there
+    z = max(lo, hi - 0.01)
     open_face = float(centre[:2] @ into[:2]) - float(np.abs(half[:2]) @ np.abs(into[:2]))
     # grip site: lateral = region centre, along the way in just outside the open face
     lateral = float(centre[:2] @ across[:2])
