@@ -18,7 +18,7 @@ import numpy as np
 
 from pipeline.policies.scripted.grasps import SLAB_THIN_M, is_upright_slab
 from pipeline.policies.scripted.primitives import Grip
-from pipeline.policies.scripted.slot import has_roof
+from pipeline.policies.scripted.slot import has_roof, region_box
 from pipeline.policies.scripted.skills import CARRY_CLEARANCE, Ctx, Plan, travel
 
 PALM_HALF_M = 0.115  # grip site above the table when the hand points sideways
@@ -27,18 +27,14 @@ OUTSIDE_M = 0.012  # grip site this far outside the open face (fingers stay out)
 READY_M = 0.13  # grip site this far out before pushing in
 
 
-def _region_box(env, target: str) -> tuple[np.ndarray, np.ndarray]:
-    r = env.region(target)
-    return r["pos"], np.abs(r["mat"]) @ r["size"]
-
-
-def shelf_opening(ctx: Ctx, obj: str, target: str) -> np.ndarray | None:
-    """Unit horizontal direction pointing into the shelf through its open side, or None."""
+def open_side(ctx: Ctx, obj: str, target: str) -> np.ndarray | None:
+    """Unit horizontal direction pointing into a roofed region through its one open side,
+    for an upright slab; None otherwise."""
     s = ctx.scene
     env = s.env
     if not env.is_region(target) or env.region(target)["joints"] or not is_upright_slab(s, obj):
         return None
-    centre, half = _region_box(env, target)
+    centre, half = region_box(env, target)
     if not has_roof(env, target, obj):
         return None  # open sky: not a shelf
     try:
@@ -54,9 +50,6 @@ def shelf_opening(ctx: Ctx, obj: str, target: str) -> np.ndarray | None:
             open_sides.append(d)
     if len(open_sides) != 1:
         return None
-    lo, hi = _height_range(ctx, obj, target)
-    if lo > hi:
-        return None  # too low a gap for the tilted hand (under a shelf's plank)
     d = open_sides[0]
     # the way in must not point the hand back at the robot
     if float(-d[:2] @ (centre[:2] - base)) < -0.05:
@@ -64,11 +57,20 @@ def shelf_opening(ctx: Ctx, obj: str, target: str) -> np.ndarray | None:
     return -d
 
 
+def shelf_opening(ctx: Ctx, obj: str, target: str) -> np.ndarray | None:
+    """The way into the shelf (see `open_side`) when its gap is high enough for this skill."""
+    into = open_side(ctx, obj, target)
+    if into is None:
+        return None
+    lo, hi = _height_range(ctx, obj, target)
+    return into if lo <= hi else None  # else too low a gap (under a shelf's plank): tip_push.py
+
+
 def _height_range(ctx: Ctx, obj: str, target: str) -> tuple[float, float]:
     """Lowest and highest grip-site height at which the flat book fits the gap and the
     palm clears the table."""
     s = ctx.scene
-    centre, half = _region_box(s.env, target)
+    centre, half = region_box(s.env, target)
     floor = s.support_top(centre[:2], 0.005, {obj}, below=centre[2] + half[2])
     thin = SLAB_THIN_M / 2  # half a slab's thickness at most (is_upright_slab)
     lo = max(floor + PLANK_GAP_M + thin, s.table_height() + PALM_HALF_M)
@@ -78,7 +80,7 @@ def _height_range(ctx: Ctx, obj: str, target: str) -> tuple[float, float]:
 def slide_into_shelf(ctx: Ctx, obj: str, target: str, into: np.ndarray) -> Plan:
     s = ctx.scene
     env = s.env
-    centre, half = _region_box(env, target)
+    centre, half = region_box(env, target)
     eef = s.eef()
     box = s.box(obj)
     across = np.array([-into[1], into[0], 0.0])

@@ -43,14 +43,15 @@ def footprint(corners: np.ndarray) -> tuple[float, float, float, np.ndarray]:
     return long_theta, float(np.ptp(a)), thin, centre
 
 
-def _region_box(env, target: str) -> tuple[np.ndarray, np.ndarray]:
+def region_box(env, target: str) -> tuple[np.ndarray, np.ndarray]:
+    """Centre and half extents (world axes) of a region site."""
     r = env.region(target)
     return r["pos"], np.abs(r["mat"]) @ r["size"]
 
 
 def has_roof(env, target: str, obj: str) -> bool:
     """Something lies above the region's middle height over its centre (a shelf's roof)."""
-    centre, _ = _region_box(env, target)
+    centre, _ = region_box(env, target)
     return env.ray_down(centre[:2], centre[2] + 0.6, centre[2], ignore=obj) is not None
 
 
@@ -61,7 +62,7 @@ def slot_alignment(ctx: Ctx, obj: str, target: str) -> float | None:
     env = s.env
     if not env.is_region(target) or env.region(target)["joints"] or not is_upright_slab(s, obj):
         return None
-    centre, half = _region_box(env, target)
+    centre, half = region_box(env, target)
     if has_roof(env, target, obj):
         return None
     _, length, thin, _ = footprint(env.object_corners(obj))
@@ -84,7 +85,7 @@ def _wrap_half(a: float) -> float:
 def place_in_slot(ctx: Ctx, obj: str, target: str, angle: float) -> Plan:
     s = ctx.scene
     env = s.env
-    centre, half = _region_box(env, target)
+    centre, half = region_box(env, target)
     theta, _, _, foot = footprint(env.object_corners(obj))
     turn = _wrap_half(angle - theta)
     # of the two hand yaws giving this footprint, the one nearer the wrist's middle
