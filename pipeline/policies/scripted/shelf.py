@@ -18,7 +18,7 @@ import numpy as np
 
 from pipeline.policies.scripted.grasps import SLAB_THIN_M, is_upright_slab
 from pipeline.policies.scripted.primitives import Grip
-from pipeline.policies.scripted.slot import has_roof, region_box
+from pipeline.policies.scripted.slot import footprint, has_roof, region_box
 from pipeline.policies.scripted.skills import CARRY_CLEARANCE, Ctx, Plan, travel
 
 PALM_HALF_M = 0.115  # grip site above the table when the hand points sideways
@@ -77,6 +77,33 @@ def _height_range(ctx: Ctx, obj: str, target: str) -> tuple[float, float]:
     return lo, centre[2] + half[2] - thin - 0.01
 
 
+def _clear_lateral(ctx: Ctx, obj: str, target: str, into: np.ndarray, z: float, start: float, end: float) -> float:
+    """Sideways position (along `across`) of the grip site for the way in: the book (its
+    length across) must stay inside the region; the palm, reaching PALM_HALF_M below the
+    grip site and up to ~0.12 m behind it, should pass over no object; nearest the centre."""
+    s = ctx.scene
+    centre, half = region_box(s.env, target)
+    across = np.array([-into[1], into[0]])
+    mid = float(centre[:2] @ across)
+    room = float(np.abs(half[:2]) @ np.abs(across))
+    _, length, _, _ = footprint(s.env.object_corners(obj))
+    reach = max(0.0, room - length / 2 - 0.012)
+    others = [s.box(o) for o in s.env.object_names if o != obj]
+    others = [b for b in others if b.hi[2] > z - PALM_HALF_M]
+    best = None
+    for lat in np.arange(mid - reach, mid + reach + 1e-6, 0.005):
+        hits = 0
+        for b in others:
+            a = np.array([b.lo[:2] @ into[:2], b.hi[:2] @ into[:2]])
+            c = np.array([b.lo[:2] @ across, b.hi[:2] @ across])
+            if (min(a) < end - 0.02 and max(a) > start - 0.12) and (min(c) < lat + 0.045 and max(c) > lat - 0.045):
+                hits += 1
+        cost = 10 * hits + abs(lat - mid)
+        if best is None or cost < best[0]:
+            best = (cost, float(lat))
+    return mid if best is None else best[1]
+
+
 def slide_into_shelf(ctx: Ctx, obj: str, target: str, into: np.ndarray) -> Plan:
     s = ctx.scene
     env = s.env
@@ -91,8 +118,9 @@ def slide_into_shelf(ctx: Ctx, obj: str, target: str, into: np.ndarray) -> Plan:
     # high in the gap: the wrist, a hand's length behind, then passes over books standing there
     z = max(lo, hi - 0.01)
     open_face = float(centre[:2] @ into[:2]) - float(np.abs(half[:2]) @ np.abs(into[:2]))
-    # grip site: lateral = region centre, along the way in just outside the open face
-    lateral = float(centre[:2] @ across[:2])
+    # grip site: along the way in, just outside the open face; sideways where the palm
+    # (vertical, behind the fingers) passes over no standing object
+    lateral = _clear_lateral(ctx, obj, target, into, z, open_face - READY_M, open_face - OUTSIDE_M)
     inside = across * lateral + into * (open_face - OUTSIDE_M)
     ready = across * lateral + into * (open_face - READY_M)
     inside[2] = ready[2] = z
@@ -105,7 +133,7 @@ def slide_into_shelf(ctx: Ctx, obj: str, target: str, into: np.ndarray) -> Plan:
     ctx.yaw_hold, ctx.approach_hold = yaw, into.copy()
     yield ctx.move(ready + [0, 0, 0.03], gripper=1.0, speed=0.4, yaw=yaw, approach=into, tol=0.012, rot_tol=0.08,
                    max_steps=80, label="tilt")
-    if s.holding_any() != obj:
+    if not s.holding(obj):  # (the palm may also touch a neighbour: holding_any could name it)
         ctx.events.append(f"dropped:{obj}")
         ctx.approach_hold = None
         return
