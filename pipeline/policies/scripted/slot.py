@@ -8,8 +8,8 @@ until its bottom is just above the floor and open. The book is held near its top
 (`grasps.SLAB_GRIP_BELOW_TOP`) so the fingers stay above the compartment walls.
 
 `slot_alignment` says whether this skill applies: an upright slab, a region that is not a
-drawer and has open sky above it (a shelf's roof would stop the descent), and a footprint
-that fits the region only when aligned with it.
+drawer and has open sky above it (a shelf's roof would stop the descent: shelf.py), and
+a footprint that fits the region when aligned with one of its sides.
 """
 
 from __future__ import annotations
@@ -62,17 +62,16 @@ def slot_alignment(ctx: Ctx, obj: str, target: str) -> float | None:
     env = s.env
     if not env.is_region(target) or env.region(target)["joints"] or not is_upright_slab(s, obj):
         return None
-    centre, half = region_box(env, target)
     if has_roof(env, target, obj):
         return None
-    _, length, thin, _ = footprint(env.object_corners(obj))
+    _, half = region_box(env, target)
+    theta, length, thin, _ = footprint(env.object_corners(obj))
     options = []
     for angle, (along, across) in ((0.0, (half[0], half[1])), (np.pi / 2, (half[1], half[0]))):
         if length / 2 + FIT_MARGIN <= along and thin / 2 + FIT_MARGIN <= across:
             options.append(angle)
     if not options:
         return None
-    theta = footprint(env.object_corners(obj))[0]
     # the one needing the least turn of the hand
     return min(options, key=lambda a: abs(_wrap_half(a - theta)))
 
@@ -83,6 +82,7 @@ def _wrap_half(a: float) -> float:
 
 
 def place_in_slot(ctx: Ctx, obj: str, target: str, angle: float) -> Plan:
+    """`angle`: from `slot_alignment`."""
     s = ctx.scene
     env = s.env
     centre, half = region_box(env, target)
