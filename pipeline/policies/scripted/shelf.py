@@ -121,7 +121,10 @@ def slide_into_shelf(ctx: Ctx, obj: str, target: str, into: np.ndarray) -> Plan:
     # grip site: along the way in, just outside the open face; sideways where the palm
     # (vertical, behind the fingers) passes over no standing object
     lateral = _clear_lateral(ctx, obj, target, into, z, open_face - READY_M, open_face - OUTSIDE_M)
-    inside = across * lateral + into * (open_face - OUTSIDE_M)
+    off = ctx.noise.place_offset()  # the failure generator's seeded error (zero: none)
+    ctx.note(place_offset=[float(v) for v in off])
+    lateral += float(off[:2] @ across[:2])
+    inside = across * lateral + into * (open_face - OUTSIDE_M + min(0.0, float(off[:2] @ into[:2])))
     ready = across * lateral + into * (open_face - READY_M)
     inside[2] = ready[2] = z
     # carry upright to above the ready point (hand turned), then tilt there
@@ -139,7 +142,9 @@ def slide_into_shelf(ctx: Ctx, obj: str, target: str, into: np.ndarray) -> Plan:
         return
     yield ctx.move(ready, gripper=1.0, speed=0.4, yaw=yaw, approach=into, tol=0.008, max_steps=40, label="level")
     yield ctx.move(inside, gripper=1.0, speed=0.3, yaw=yaw, approach=into, tol=0.008, max_steps=80, label="push_in")
-    yield Grip(-1.0, ctx.open_steps + 4, label="open")
+    t = ctx.noise.timing()
+    ctx.note(release_timing=t)
+    yield Grip(-1.0, ctx.open_steps + 4 + max(t, 0), label="open")
     yield ctx.move(s.eef() - into * 0.08, yaw=yaw, approach=into, tol=0.015, max_steps=30, label="back_out")
     ctx.yaw_hold, ctx.approach_hold = 0.0, None
     yield ctx.move(s.eef() + [0, 0, 0.06], tol=0.02, rot_tol=0.15, max_steps=40, label="untilt")

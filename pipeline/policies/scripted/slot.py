@@ -98,12 +98,15 @@ def place_in_slot(ctx: Ctx, obj: str, target: str, angle: float) -> Plan:
     hold = rot @ (eef[:2] - foot)  # grip site from the footprint centre, after the turn
     bottom = eef[2] - s.box(obj).lo[2]  # grip site above the slab's bottom
     floor = s.support_top(centre[:2], 0.005, {obj}, below=centre[2] + half[2])
-    release = floor + RELEASE_GAP + bottom
+    off = ctx.noise.place_offset()  # the failure generator's seeded error (zero: none)
+    ctx.note(place_offset=[float(v) for v in off])
+    aim = centre[:2] + off[:2]
+    release = floor + RELEASE_GAP + bottom + off[2]
     radius = 0.5 * float(np.max(s.box(obj).size[:2]))
     walls = s.path_clearance(centre, centre, radius + 0.03, {obj})
     hover_z = max(walls + CARRY_CLEARANCE + bottom, release + 0.05)
     lift_z = max(s.path_clearance(eef, centre, radius, {obj}) + CARRY_CLEARANCE + bottom, hover_z)
-    over = np.array([centre[0] + hold[0], centre[1] + hold[1], hover_z])
+    over = np.array([aim[0] + hold[0], aim[1] + hold[1], hover_z])
     yield from travel(ctx, over, yaw, 1.0, lift_z)
     ctx.yaw_hold = yaw
     yield ctx.move(over, gripper=1.0, speed=0.5, yaw=yaw, tol=0.006, rot_tol=0.04, max_steps=60, label="align")
@@ -113,13 +116,16 @@ def place_in_slot(ctx: Ctx, obj: str, target: str, angle: float) -> Plan:
             ctx.truth.end_hand(obj, False)
         return
     # re-measure: the slab may sit in the fingers a little off what was predicted
-    err = centre[:2] - footprint(env.object_corners(obj))[3]
+    err = aim - footprint(env.object_corners(obj))[3]
     if float(np.linalg.norm(err)) > ALIGN_TOL:
         over = s.eef() + [err[0], err[1], 0.0]
         over[2] = hover_z
         yield ctx.move(over, gripper=1.0, speed=0.3, yaw=yaw, tol=0.004, rot_tol=0.04, max_steps=40, label="align")
     goal = np.array([over[0], over[1], release])
-    yield ctx.move(goal, gripper=1.0, speed=0.3, yaw=yaw, tol=0.006, max_steps=80, label="lower")
-    yield Grip(-1.0, ctx.open_steps + 4, label="open")
+    t = ctx.noise.timing()
+    ctx.note(release_timing=t)
+    early = {"switch_gripper": -1.0, "switch_dist": 0.006 * -t} if t < 0 else {}
+    yield ctx.move(goal, gripper=1.0, speed=0.3, yaw=yaw, tol=0.006, max_steps=80, label="lower", **early)
+    yield Grip(-1.0, ctx.open_steps + 4 + max(t, 0), label="open")
     yield ctx.move(s.eef() + [0, 0, 0.03], speed=0.3, yaw=yaw, tol=0.01, max_steps=20, label="retreat")
     yield ctx.move(s.eef() + [0, 0, 0.1], yaw=yaw, tol=0.02, label="retreat")

@@ -46,7 +46,9 @@ def tip_and_push(ctx: Ctx, obj: str, target: str, into: np.ndarray) -> Plan:
     turn = yaw - ctx.yaw_hold
     c, sn = np.cos(turn), np.sin(turn)
     hold = np.array([[c, -sn], [sn, c]]) @ (eef[:2] - foot)
-    spot = across[:2] * lateral + into[:2] * (open_face - STAND_OUT_M)
+    off = ctx.noise.place_offset()  # the failure generator's seeded error (zero: none)
+    ctx.note(place_offset=[float(v) for v in off])
+    spot = across[:2] * lateral + into[:2] * (open_face - STAND_OUT_M) + off[:2]
     hang = eef[2] - s.box(obj).lo[2]
     down = np.array([spot[0] + hold[0], spot[1] + hold[1], table + hang + 0.012])
     radius = 0.5 * float(np.max(s.box(obj).size[:2]))
