@@ -23,7 +23,7 @@ from pipeline.policies.scripted.skills import CARRY_CLEARANCE, Ctx, Plan, travel
 
 PALM_HALF_M = 0.115  # grip site above the table when the hand points sideways
 PLANK_GAP_M = 0.015  # book's lower face above the shelf floor while pushed in
-OUTSIDE_M = 0.012  # grip site this far outside the open face (fingers stay out)
+REACH_IN_M = 0.03  # grip site this far inside the open face at the end (the fingers go in, the palm stays out)
 READY_M = 0.13  # grip site this far out before pushing in
 
 
@@ -120,11 +120,11 @@ def slide_into_shelf(ctx: Ctx, obj: str, target: str, into: np.ndarray) -> Plan:
     open_face = float(centre[:2] @ into[:2]) - float(np.abs(half[:2]) @ np.abs(into[:2]))
     # grip site: along the way in, just outside the open face; sideways where the palm
     # (vertical, behind the fingers) passes over no standing object
-    lateral = _clear_lateral(ctx, obj, target, into, z, open_face - READY_M, open_face - OUTSIDE_M)
+    lateral = _clear_lateral(ctx, obj, target, into, z, open_face - READY_M, open_face + REACH_IN_M)
     off = ctx.noise.place_offset()  # the failure generator's seeded error (zero: none)
     ctx.note(place_offset=[float(v) for v in off])
     lateral += float(off[:2] @ across[:2])
-    inside = across * lateral + into * (open_face - OUTSIDE_M + min(0.0, float(off[:2] @ into[:2])))
+    inside = across * lateral + into * (open_face + REACH_IN_M + min(0.0, float(off[:2] @ into[:2])))
     ready = across * lateral + into * (open_face - READY_M)
     inside[2] = ready[2] = z
     # carry upright to above the ready point (hand turned), then tilt there
@@ -142,6 +142,9 @@ def slide_into_shelf(ctx: Ctx, obj: str, target: str, into: np.ndarray) -> Plan:
         return
     yield ctx.move(ready, gripper=1.0, speed=0.4, yaw=yaw, approach=into, tol=0.008, max_steps=40, label="level")
     yield ctx.move(inside, gripper=1.0, speed=0.3, yaw=yaw, approach=into, tol=0.008, max_steps=80, label="push_in")
+    # down to the lowest height the palm allows: the book then drops least onto the shelf
+    yield ctx.move(s.eef() + [0, 0, lo - s.eef()[2]], gripper=1.0, speed=0.3, yaw=yaw, approach=into, tol=0.006,
+                   max_steps=30, label="lower")
     t = ctx.noise.timing()
     ctx.note(release_timing=t)
     yield Grip(-1.0, ctx.open_steps + 4 + max(t, 0), label="open")
