@@ -18,7 +18,7 @@ import os
 from collections import Counter
 from collections.abc import Callable
 
-from pipeline.policies.scripted import articulated
+from pipeline.policies.scripted import articulated, insert
 from pipeline.policies.scripted.grasps import plan_grasp
 from pipeline.policies.scripted.planner import order_goal
 from pipeline.policies.scripted.recovery import checks
@@ -87,7 +87,15 @@ def recover(ctx: Ctx, now: Callable[[], int], budget: int | None) -> Plan:
         if held is None and not s.gripper_open():
             yield from free_hand(ctx)
         yield from back_out(ctx)
-        if sub[0] in ("on", "in") and held != sub[1]:
+        if sub[0] == "in" and held != sub[1] and insert.can_insert(s, sub):
+            # the tilted hand's palm is wide: clear where it goes to grip the handle
+            block = [b for b in insert.blockers(s, sub) if aside[b] < MAX_ASIDE]
+            if block:
+                _debug("aside for insertion", block)
+                aside[block[0]] += 1
+                yield from insert.clear_zone(ctx, sub, block[0], aside[block[0]] - 1)
+                continue
+        elif sub[0] in ("on", "in") and held != sub[1]:
             dest = destination(ctx, sub[1], sub[2])
             in_way = checks.blockers(s, sub[1], dest, keep)
             # whatever stands where the palm goes down: after a failed grasp, or at once for
@@ -114,7 +122,9 @@ def recover(ctx: Ctx, now: Callable[[], int], budget: int | None) -> Plan:
             raise GiveUp(GiveUpReason.RETRIES_EXHAUSTED, f"{' '.join(sub)} failed {MAX_TRIES} times")
         if isinstance(ctx.noise, RetryNoise):
             ctx.noise.attempt = tries[sub]
-        if sub[0] in ("on", "in"):
+        if sub[0] == "in" and insert.can_insert(s, sub):
+            yield from insert.insert(ctx, sub)  # through a door opening, under a roof
+        elif sub[0] in ("on", "in"):
             yield from pick_place_once(ctx, sub, tries[sub])
         else:
             yield from operate_once(ctx, sub)
