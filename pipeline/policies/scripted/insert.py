@@ -26,10 +26,10 @@ from pipeline.policies.scripted.primitives import Grip
 from pipeline.policies.scripted.skills import Ctx, Plan, free_hand, grasp, place_at, travel
 
 HANDLE_OUT_M = 0.06  # boxes of a mug this far (xy) from its centre of mass form the handle
-FLOOR_MARGIN = 0.018  # object's bottom above the container floor while moving in
+FLOOR_MARGIN = 0.025  # object's bottom above the container floor while moving in
 DOOR_MARGIN = 0.014  # object's nearest point behind the door plane
 BACK_MARGIN = 0.012  # object's farthest point in front of the back wall
-STANDOFF_M = 0.11  # grip site behind the handle before advancing onto it
+STANDOFF_M = 0.07  # grip site behind the handle before advancing onto it
 MAX_TURN = np.radians(50)  # handle direction may differ this much from facing the opening
 
 
@@ -128,6 +128,7 @@ def handle_grasp(s, obj: str) -> HandleGrasp | None:
     # the bar: the handle box whose centre lies outermost along `out`
     bar = handle[int(np.argmax(((handle[:, 0] + handle[:, 1]) / 2) @ out))]
     pos = (bar[0] + bar[1]) / 2
+    pos[2] = bar[1, 2] - 0.014  # high on the bar: the arm cannot point the hand level much lower
     corners = env.object_corners(obj)
     along = (corners - body) @ out
     return HandleGrasp(pos=pos, out=out, reach=float(-along.min()), back=float(along.max()))
@@ -142,12 +143,13 @@ def can_insert(s, conjunct: tuple[str, ...]) -> bool:
 
 
 def hand_zone(s, conjunct: tuple[str, ...]) -> np.ndarray:
-    """(2, 3) world box the tilted hand takes while it grips the handle (its palm is ~21 cm
-    wide across the approach and reaches 2.6-12.4 cm behind the grip site)."""
+    """(2, 3) world box the tilted hand takes while it grips the handle: its palm is ~21 cm
+    wide across the approach and reaches 2.6-12.4 cm behind the grip site, and the wrist
+    (link 6) comes down ~20 cm further back, low over the table."""
     h = handle_grasp(s, conjunct[1])
     a = opening(s.env, conjunct[2]).inward
     across = np.array([-a[1], a[0], 0.0])
-    pts = [h.pos - a * d + across * w for d in (0.0, 0.14) for w in (-0.115, 0.115)]
+    pts = [h.pos - a * d + across * w for d in (0.0, 0.32) for w in (-0.115, 0.115)]
     lo, hi = np.min(pts, axis=0), np.max(pts, axis=0)
     return np.array([[lo[0], lo[1], h.pos[2] - 0.045], [hi[0], hi[1], h.pos[2] + 0.2]])
 
@@ -186,6 +188,11 @@ def clear_spot(s, obj: str, zone: np.ndarray) -> np.ndarray | None:
                 continue
             if any(np.all(xy + lo <= b[1, :2]) and np.all(b[0, :2] <= xy + hi) for b in boxes):
                 continue
+            # off the arm's way: the forearm comes low from the robot base to the zone
+            c = (zone[0, :2] + zone[1, :2]) / 2
+            u = np.clip((xy - base) @ (c - base) / float((c - base) @ (c - base)), 0.0, 1.0)
+            if np.linalg.norm(xy - (base + u * (c - base))) < 0.15:
+                continue
             d = float(np.hypot(dx, dy))
             if best is None or d < best[0]:
                 best = (d, xy)
@@ -195,7 +202,7 @@ def clear_spot(s, obj: str, zone: np.ndarray) -> np.ndarray | None:
 def _yaw_across(approach: np.ndarray) -> float:
     """Hand yaw whose closing axis is horizontal and across `approach` (fingers pinch a
     vertical bar); `hand_orientation` then tilts it to point along `approach`."""
-    return float(np.arctan2(approach[1], approach[0]))
+    return float(np.arctan2(approach[1], approach[0]) - np.pi)
 
 
 def insert(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:
@@ -219,11 +226,18 @@ def insert(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:
     grip = h.pos + offset
     ready = grip - a * STANDOFF_M
     lift_z = s.path_clearance(s.eef(), ready, 0.08, {obj}) + 0.09
+    # from a far-out arm pose (after putting something aside) the arm cannot then point
+    # the hand level low enough: pass over the home pose first (its null-space posture)
+    from pipeline.policies.scripted.recovery import checks
+
+    home = checks.robot_base(s)[:2] + checks.HOME_XY
+    if np.linalg.norm(s.eef()[:2] - home) > 0.15:
+        yield from travel(ctx, np.array([home[0], home[1], lift_z]), 0.0, -1.0, lift_z)
     yield from travel(ctx, ready + [0, 0, 0.08], 0.0, -1.0, lift_z)
     ctx.yaw_hold, ctx.approach_hold = yaw, a
     yield ctx.move(ready + [0, 0, 0.04], yaw=yaw, approach=a, tol=0.015, rot_tol=0.12, max_steps=60, label="tilt")
-    yield ctx.move(ready, yaw=yaw, approach=a, speed=0.5, tol=0.01, max_steps=40, label="lower_behind")
-    yield ctx.move(grip, yaw=yaw, approach=a, speed=0.4, tol=0.007, max_steps=50, label="descend")
+    yield ctx.move(ready, yaw=yaw, approach=a, tol=0.01, max_steps=30, label="lower_behind")
+    yield ctx.move(grip, yaw=yaw, approach=a, speed=0.6, tol=0.007, max_steps=60, label="descend")
     yield Grip(1.0, ctx.close_steps + 4, label="grip_handle")
     body = env.object_pose(obj)[0]
     hold = s.eef() - body  # grip site relative to the body origin, kept while carrying
@@ -261,16 +275,16 @@ def insert(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:
     yield ctx.move(pre, gripper=1.0, yaw=yaw, approach=a, speed=0.5, tol=0.008, max_steps=40, label="align")
     goal = dest + hold
     goal[2] = carry_z
-    yield ctx.move(goal, gripper=1.0, yaw=yaw, approach=a, speed=0.4, tol=0.008, max_steps=80, label="move_in")
+    yield ctx.move(goal, gripper=1.0, yaw=yaw, approach=a, speed=0.7, tol=0.01, max_steps=50, label="move_in")
     if s.holding_any() != obj:
         ctx.events.append(f"dropped:{obj}")
-    yield ctx.move(goal - [0, 0, FLOOR_MARGIN - 0.004], gripper=1.0, yaw=yaw, approach=a, speed=0.3, tol=0.006,
-                   max_steps=30, label="lower")
+    yield ctx.move(goal - [0, 0, FLOOR_MARGIN - 0.004], gripper=1.0, yaw=yaw, approach=a, speed=0.4, tol=0.006,
+                   max_steps=15, label="lower")
     yield Grip(-1.0, ctx.open_steps + 4, label="open")
     yield ctx.move(s.eef() - a * (STANDOFF_M + 0.02), yaw=yaw, approach=a, speed=0.5, tol=0.015, max_steps=50,
                    label="back_out")
     ctx.yaw_hold, ctx.approach_hold = 0.0, None
-    yield ctx.move(s.eef() + [0, 0, 0.08], tol=0.02, rot_tol=0.15, max_steps=40, label="untilt")
+    yield ctx.move(s.eef() + [0, 0, 0.08], tol=0.02, rot_tol=0.2, max_steps=25, label="untilt")
     if ctx.truth is not None:
         ctx.truth.end_hand(obj, s.satisfied(conjunct))
 
