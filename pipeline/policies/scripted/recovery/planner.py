@@ -87,15 +87,7 @@ def recover(ctx: Ctx, now: Callable[[], int], budget: int | None) -> Plan:
         if held is None and not s.gripper_open():
             yield from free_hand(ctx)
         yield from back_out(ctx)
-        if sub[0] == "in" and held != sub[1] and insert.can_insert(s, sub):
-            # the tilted hand's palm is wide: clear where it goes to grip the handle
-            block = [b for b in insert.blockers(s, sub) if aside[b] < MAX_ASIDE]
-            if block:
-                _debug("aside for insertion", block)
-                aside[block[0]] += 1
-                yield from insert.clear_zone(ctx, sub, block[0], aside[block[0]] - 1)
-                continue
-        elif sub[0] in ("on", "in") and held != sub[1]:
+        if sub[0] in ("on", "in") and held != sub[1] and not insert.can_insert(s, sub):
             dest = destination(ctx, sub[1], sub[2])
             in_way = checks.blockers(s, sub[1], dest, keep)
             # whatever stands where the palm goes down: after a failed grasp, or at once for
