@@ -342,3 +342,11 @@ def insert(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:
     yield ctx.move(s.eef() + [0, 0, 0.06], tol=0.03, rot_tol=0.35, max_steps=20, label="untilt")
     if ctx.truth is not None:
         ctx.truth.end_hand(obj, s.satisfied(conjunct))
+
+
+def insert_into(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:
+    """The plain expert's skill: up to `ctx.max_attempts` insertions until the conjunct holds."""
+    for _ in range(ctx.max_attempts):
+        if ctx.scene.satisfied(conjunct) or not can_insert(ctx.scene, conjunct):
+            return
+        yield from insert(ctx, conjunct)

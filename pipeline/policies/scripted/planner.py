@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from pipeline.policies.scripted import articulated, knobs
+from pipeline.policies.scripted import articulated, insert, knobs
 from pipeline.policies.scripted.primitives import Move
 from pipeline.policies.scripted.skills import Ctx, Plan, free_hand, pick_place
 
@@ -72,7 +72,9 @@ def plan_episode(ctx: Ctx) -> Plan:
                 continue
             if c in goal and s.satisfied(c):
                 continue
-            yield from skill_for(c)(ctx, c)
+            # into a container under a roof (a microwave): through its door opening
+            skill = insert.insert_into if c[0] == "in" and insert.can_insert(s, c) else skill_for(c)
+            yield from skill(ctx, c)
         if s.env.goal_satisfied():
             break
     yield from free_hand(ctx)
