@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pipeline.policies.scripted.pan_handle import pan_handle_grasp
 from pipeline.policies.scripted.scene import TABLE_MARGIN, Scene
 
 MAX_SPAN = 0.068  # widest object (along the closing axis) grasped whole
@@ -119,6 +120,9 @@ def plan_grasp(scene: Scene, obj: str, dest: np.ndarray | None = None, choice: i
     handle = handle_grasp(scene, obj)
     if handle is not None and choice % 2 == 0:
         return handle
+    pan = pan_handle_grasp(scene, obj)  # a frying pan: always by its handle
+    if pan is not None:
+        return pan
     # rim grasp: radial direction whose outer finger lands clear
     ranked = []
     for theta in np.linspace(-np.pi, np.pi, 16, endpoint=False):
