@@ -160,6 +160,12 @@ def destination(ctx: Ctx, obj: str, target: str) -> np.ndarray:
 
 
 def place(ctx: Ctx, obj: str, target: str) -> Plan:
+    from pipeline.policies.scripted import shelf  # shelf builds on this module
+
+    comp = shelf.compartment(ctx.scene, target)
+    if comp is not None:  # a shelf compartment: slid in from its open side, not lowered in
+        yield from shelf.slide_in(ctx, obj, comp)
+        return
     yield from place_at(ctx, obj, place_xy(ctx, obj, target), support_ceiling(ctx.scene.env, target))
 
 
