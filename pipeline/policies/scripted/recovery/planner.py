@@ -28,6 +28,7 @@ from pipeline.policies.scripted.recovery.pick_place import pick_place_once
 from pipeline.policies.scripted.recovery.put_aside import put_aside
 from pipeline.policies.scripted.recovery.reasons import GiveUp, GiveUpReason
 from pipeline.policies.scripted.recovery.variation import RetryNoise
+from pipeline.policies.scripted.stack import carried
 from pipeline.policies.scripted.skills import Ctx, Plan, destination, free_hand
 
 MAX_TRIES = 4  # attempts per subgoal (each one different)
@@ -54,7 +55,7 @@ def next_subgoal(ctx: Ctx, steps: list[tuple[str, ...]], goal: list[tuple[str, .
                 todo.append(c)
     held = s.holding_any()
     for c in todo:
-        if c[0] in ("on", "in") and c[1] == held:
+        if c[0] in ("on", "in") and (c[1] == held or (held is not None and carried(s, c[1]))):
             return c
     return todo[0] if todo else None
 
@@ -78,6 +79,8 @@ def recover(ctx: Ctx, now: Callable[[], int], budget: int | None) -> Plan:
         if hopeless is not None:
             raise GiveUp(*hopeless)
         held = s.holding_any()
+        if held is not None and sub[0] in ("on", "in") and carried(s, sub[1]):
+            held = sub[1]  # the hand holds the stack whose bottom is the subgoal's object
         if held is not None and not (sub[0] in ("on", "in") and sub[1] == held):
             aside[held] += 1
             if aside[held] > MAX_ASIDE + 1:
