@@ -161,11 +161,13 @@ def destination(ctx: Ctx, obj: str, target: str) -> np.ndarray:
 
 
 def place(ctx: Ctx, obj: str, target: str) -> Plan:
-    from pipeline.policies.scripted import shelf  # shelf builds on this module
+    from pipeline.policies.scripted import slide_in  # builds on this module's `travel`
 
-    comp = shelf.compartment(ctx.scene, target)
-    if comp is not None:  # a shelf compartment: slid in from its open side, not lowered in
-        yield from shelf.slide_in(ctx, obj, comp)
+    comp = slide_in.compartment(ctx.scene, target)
+    if comp is not None and slide_in.hand_stays_out(ctx, obj, comp):
+        # a shelf compartment, the object held by its outer end (a pan's handle): slid in
+        # from the open side, not lowered onto the board above
+        yield from slide_in.slide_in(ctx, obj, comp)
         return
     yield from place_at(ctx, obj, place_xy(ctx, obj, target), support_ceiling(ctx.scene.env, target))
 

@@ -1,4 +1,5 @@
-"""Skill: slide a held object into a shelf compartment (a region with a board above it).
+"""Skill: slide a held object by its outer end into a shelf compartment (a region with a
+board above it), e.g. a frying pan held by its handle.
 
 Input: a `Ctx` whose hand holds `obj`, and an `in` target region. A compartment of a
 shelf has a board a hand's height or less above its floor, so the usual "carry above,
@@ -7,7 +8,8 @@ Instead the object is carried level, just above the compartment's floor, to a po
 front of its open side (the one side no wall of the shelf covers), pushed in horizontally
 until its far edge is near the back, set down, and let go; the hand holds the object's
 outer end (a pan's handle) and stays outside the shelf. `compartment` says whether a
-region is such a compartment (None otherwise), so `place` can pick this skill.
+region is such a compartment (None otherwise) and `hand_stays_out` whether the object is
+held far enough out for it; a book held at its top edge goes in by `shelf.py` instead.
 """
 
 from __future__ import annotations
@@ -18,11 +20,13 @@ import numpy as np
 
 from pipeline.policies.scripted.primitives import Grip
 from pipeline.policies.scripted.skills import Ctx, Plan, travel
+from pipeline.policies.scripted.stack import carried
 
 HAND_ROOM_M = 0.15  # a board lower than this above the floor leaves no room to lower a hand in
 LIFT_M = 0.012  # object's bottom above the floor while sliding
 BACK_GAP_M = 0.015  # far edge of the object short of the compartment's back
 STAGE_GAP_M = 0.03  # object's near edge this far in front of the opening before sliding
+HAND_OUT_M = 0.05  # grip site at least this far outside the open face once the object is in
 
 
 @dataclass(frozen=True)
@@ -85,6 +89,31 @@ def compartment(scene, region: str) -> Compartment | None:
     return Compartment(lo=lo, hi=hi, floor=floor, ceiling=ceiling, out=np.array([*best[1], 0.0]))
 
 
+def _depths(ctx: Ctx, obj: str, comp: Compartment) -> tuple[float, float]:
+    """(body's final coordinate along the way out, the open face's coordinate)."""
+    s = ctx.scene
+    out = comp.out
+    a = int(np.argmax(np.abs(out[:2])))
+    body = s.env.object_pose(obj)[0]
+    box = s.box(obj)
+    back_ext = body[a] - box.lo[a] if out[a] > 0 else box.hi[a] - body[a]
+    back_face = comp.lo[a] if out[a] > 0 else comp.hi[a]
+    open_face = comp.hi[a] if out[a] > 0 else comp.lo[a]
+    # the body as deep as the object fits, but inside the region (the goal reads the body)
+    depth = back_face + out[a] * (back_ext + BACK_GAP_M)
+    inner, outer = back_face + out[a] * 0.01, open_face - out[a] * 0.01
+    return float(np.clip(depth, min(inner, outer), max(inner, outer))), float(open_face)
+
+
+def hand_stays_out(ctx: Ctx, obj: str, comp: Compartment) -> bool:
+    """The grip site ends at least HAND_OUT_M outside the open face with the object in."""
+    s = ctx.scene
+    a = int(np.argmax(np.abs(comp.out[:2])))
+    depth, open_face = _depths(ctx, obj, comp)
+    grip = depth + (s.eef()[a] - s.env.object_pose(obj)[0][a])
+    return bool((grip - open_face) * comp.out[a] >= HAND_OUT_M)
+
+
 def slide_in(ctx: Ctx, obj: str, comp: Compartment) -> Plan:
     s = ctx.scene
     env = s.env
@@ -100,20 +129,12 @@ def slide_in(ctx: Ctx, obj: str, comp: Compartment) -> Plan:
 
     body, rlo, rhi = body_box()
     back_ext = -rlo[a] if out[a] > 0 else rhi[a]  # body to the object's edge facing the back
-    front_ext = rhi[a] if out[a] > 0 else -rlo[a]
-    back_face = comp.lo[a] if out[a] > 0 else comp.hi[a]
-    open_face = comp.hi[a] if out[a] > 0 else comp.lo[a]
+    depth, open_face = _depths(ctx, obj, comp)
     centre = (comp.lo + comp.hi) / 2
-    # the body as deep as the object fits, but inside the region (the goal reads the body)
-    depth = back_face + out[a] * (back_ext + BACK_GAP_M)
-    inner = back_face + out[a] * 0.01
-    outer = open_face - out[a] * 0.01
-    depth = float(np.clip(depth, min(inner, outer), max(inner, outer)))
     final = np.zeros(3)
     final[a], final[o] = depth, centre[o]
     stage = final.copy()
     stage[a] = open_face + out[a] * (back_ext + STAGE_GAP_M)
-    _ = front_ext
 
     def hand_for(body_xy: np.ndarray, bottom_z: float) -> np.ndarray:
         """Grip-site target that brings the object's body to `body_xy` and its bottom to `bottom_z`."""
@@ -127,7 +148,7 @@ def slide_in(ctx: Ctx, obj: str, comp: Compartment) -> Plan:
     yield from travel(ctx, goal + [0, 0, 0.05], yaw, 1.0, lift_z)
     yield ctx.move(hand_for(stage[:2], carry_z), gripper=1.0, speed=0.5, yaw=yaw, tol=0.01, max_steps=60,
                    label="stage")
-    if s.holding_any() != obj:
+    if not carried(s, obj):
         ctx.events.append(f"dropped:{obj}")
         return
     yield ctx.move(hand_for(final[:2], carry_z), gripper=1.0, speed=0.4, yaw=yaw, tol=0.01, max_steps=90,
