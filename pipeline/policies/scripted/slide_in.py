@@ -74,8 +74,7 @@ def compartment(scene, region: str) -> Compartment | None:
         for b in boxes:
             if not (b[0, 2] < mid_z < b[1, 2]):
                 continue
-            near = b[0, a] - 0.03 <= face <= b[1, a] + 0.03 or (d[a] > 0 and b[0, a] >= face and b[0, a] - face < 0.05) \
-                or (d[a] < 0 and b[1, a] <= face and face - b[1, a] < 0.05)
+            near = b[0, a] - 0.04 <= face <= b[1, a] + 0.04  # a box at (or just beyond) this face
             o = 1 - a
             spans = b[0, o] < centre[o] < b[1, o]
             walled |= near and spans
