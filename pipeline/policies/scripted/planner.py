@@ -2,7 +2,8 @@
 
 Input: the BDDL goal (`SimEnv.goal`, lower-case conjunct tuples) and a `Ctx`. Output: a
 generator of primitives for the whole episode. Order: open things first, then knobs,
-then pick-and-place (a container must be open before something goes in), then close.
+then pick-and-place (a container must be open before something goes in; an object that
+another goes onto is placed first), then close.
 A drawer that must receive an object is opened first even when the goal does not say
 so. The plan starts from whatever state it finds (mid-task starts from saved failure
 scenes): satisfied conjuncts are skipped, an object already in hand is placed first,
