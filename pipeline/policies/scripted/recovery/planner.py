@@ -31,6 +31,7 @@ from pipeline.policies.scripted.recovery.put_aside import put_aside
 from pipeline.policies.scripted.recovery.reasons import GiveUp, GiveUpReason
 from pipeline.policies.scripted.recovery.variation import RetryNoise
 from pipeline.policies.scripted.skills import Ctx, Plan, destination
+from pipeline.policies.scripted.stack import carried
 
 OPEN_FULL = 0.85  # a drawer this far open (of its range) lets a hand reach all of its inside
 MAX_TRIES = 4  # attempts per subgoal (each one different)
@@ -57,7 +58,7 @@ def next_subgoal(ctx: Ctx, steps: list[tuple[str, ...]], goal: list[tuple[str, .
                 todo.append(c)
     held = checks.held(s)
     for c in todo:
-        if c[0] in ("on", "in") and c[1] == held:
+        if c[0] in ("on", "in") and carried(s, c[1], held):
             return c
     return todo[0] if todo else None
 
@@ -81,6 +82,8 @@ def recover(ctx: Ctx, now: Callable[[], int], budget: int | None) -> Plan:
         if hopeless is not None:
             raise GiveUp(*hopeless)
         held = checks.held(s)
+        if held is not None and sub[0] in ("on", "in") and carried(s, sub[1], held):
+            held = sub[1]  # the hand holds the stack whose bottom is the subgoal's object
         if held is not None and not (sub[0] in ("on", "in") and sub[1] == held):
             aside[held] += 1
             if aside[held] > MAX_ASIDE + 1:
