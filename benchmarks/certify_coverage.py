@@ -10,7 +10,7 @@ and per level, suite and category, with the recovery expert's reasons for the sc
 did not certify; writes it as markdown, the per-scene rows as JSON and a bar chart PNG to
 benchmarks/results/ (`--out` stem).
 
-    .venv/bin/python benchmarks/certify_coverage.py runs/default [--tries 2] [--horizon 400] \\
+    .venv/bin/python benchmarks/certify_coverage.py runs/default [--tries 2] [--horizon 520] \\
         [--workers 2] [--out benchmarks/results/certify_coverage]
 """
 
@@ -140,7 +140,10 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("run", type=Path, help="a run folder (with release/) or a release folder")
     ap.add_argument("--tries", type=int, default=2)
-    ap.add_argument("--horizon", type=int, default=400)
+    from pipeline.config import Config
+
+    # default: the release's own certificate horizon (= eval.horizon, what a policy gets)
+    ap.add_argument("--horizon", type=int, default=Config().release.certify_horizon)
     ap.add_argument("--chunk", type=int, default=8)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--out", type=Path, default=OUT, help="output stem (.md, .json, .png)")

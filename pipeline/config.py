@@ -275,7 +275,10 @@ class Stage3Config(_Strict):
 class ReleaseConfig(_Strict):
     output_dir: Path | None = None  # default: <run.output_dir>/release
     certify_tries: int = Field(default=2, ge=0)  # expert tries per scene; 0 = skip
-    certify_horizon: int = Field(default=400, ge=1)
+    # steps per certificate try: the horizon `recover eval` gives a policy from a scene
+    # (eval.horizon, and the benchmark's own task horizon, 520), so "certified" means a
+    # competent policy can finish within the budget the benchmark grants, no more, no less
+    certify_horizon: int = Field(default=520, ge=1)
     # which zero-noise expert certifies: the recovery expert, or the plain stage-1 expert
     certify_expert: Literal["recovery", "plain"] = "recovery"
     # recovery demonstrations (`recover demos`): successful recovery-expert rollouts per

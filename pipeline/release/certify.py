@@ -28,7 +28,7 @@ from pipeline.release.scene_physics import scene_task
 from pipeline.sim import SimEnv
 
 # bump when the experts change so cached certificates of an older expert are not reused
-EXPERT_VERSION = {"plain": 1, "recovery": 1}
+EXPERT_VERSION = {"plain": 1, "recovery": 2}
 
 
 @dataclass(frozen=True)

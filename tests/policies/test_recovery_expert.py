@@ -8,6 +8,7 @@ import pytest
 
 from pipeline.policies.base import Policy
 from pipeline.policies.scripted.recovery import GiveUpReason, make_recovery_expert
+from pipeline.policies.scripted.recovery import checks
 from pipeline.policies.scripted.recovery.variation import variation_levels
 from pipeline.policies.scripted.scene import Scene
 from pipeline.rollout import run_episode
@@ -93,3 +94,16 @@ def test_variation_is_zero_noise_at_zero_and_bounded():
     with pytest.raises(ValueError, match="variation"):
         variation_levels(1.5)
     assert np.isfinite(levels.grasp_offset_m)
+
+
+def test_an_arm_locked_at_its_elbow_limit_is_bent_back_and_the_task_done(bowl_on_plate):
+    # a failed rollout's arm stretched far out, elbow (joint 4) at its straight limit: moving
+    # the hand alone cannot pull it back (the old expert spent its 400 steps stuck there)
+    task, env = bowl_on_plate
+    start(env)
+    for i, q in enumerate([0.22, 1.59, 0.07, -0.07, -0.01, 1.6, 0.99], start=1):
+        set_joint(env, f"robot0_joint{i}", q, settle=0)
+    env.settle(10)
+    assert checks.elbow_locked(Scene(env))
+    result, policy = finish(env, task, horizon=300)
+    assert result.success

@@ -160,6 +160,24 @@ def destination(ctx: Ctx, obj: str, target: str) -> np.ndarray:
 
 
 def place(ctx: Ctx, obj: str, target: str) -> Plan:
+    # a book into a narrow compartment or a roofed shelf goes in its own way (slot.py,
+    # shelf.py, tip_push.py; imported here because they build on this module's `travel`)
+    from pipeline.policies.scripted.shelf import open_side, shelf_opening, slide_into_shelf
+    from pipeline.policies.scripted.slot import place_in_slot, slot_alignment
+    from pipeline.policies.scripted.tip_push import tip_and_push
+
+    into = shelf_opening(ctx, obj, target)
+    if into is not None:
+        yield from slide_into_shelf(ctx, obj, target, into)
+        return
+    into = open_side(ctx, obj, target)
+    if into is not None:  # a gap too low for the tilted hand: tip the book flat, push it in
+        yield from tip_and_push(ctx, obj, target, into)
+        return
+    angle = slot_alignment(ctx, obj, target)
+    if angle is not None:
+        yield from place_in_slot(ctx, obj, target, angle)
+        return
     yield from place_at(ctx, obj, place_xy(ctx, obj, target), support_ceiling(ctx.scene.env, target))
 
 

@@ -10,7 +10,15 @@ from pipeline.policies.scripted.scene import Scene
 
 OFF_TABLE_M = 0.06  # a body this far below the table top has fallen off it
 REACH_M = 0.95  # horizontal reach from the robot base the arm can still grasp at
+# ... and the nearest: closer in, the folded arm hits itself or the base before the palm
+# gets down (measured: a book fallen against the base, 0.28 m out, missed 3 of 3 grasps)
+MIN_REACH_M = 0.25  # (to the object's nearest edge)
 JOINT_MARGIN = 0.15  # radians from a joint limit that count as an awkward pose
+# the elbow (joint 4) this close to its straight limit: the arm is near full reach, and
+# raising the hand straight up stretches it into the limit, a singular pose from which the
+# controller can no longer pull the hand back (measured: stuck 80 steps, 20 cm short of home)
+ELBOW_STRAIGHT = 0.4
+ELBOW_LOCKED = 0.06  # ... and this close it is locked: only tilting the hand bends it again
 SAFE_Z = 0.16  # grip site above the table top from which any approach may start
 # comfortable region of the grip site (x, y), relative to the robot base
 HOME_XY = np.array([0.45, 0.0])
@@ -37,8 +45,13 @@ def hopeless(scene: Scene, objects: list[str]) -> tuple[GiveUpReason, str] | Non
             return GiveUpReason.OBJECT_OFF_TABLE, f"{o} at z {p[2]:.2f}, table top {table:.2f}"
     for o in objects:
         p = scene.env.object_pose(o)[0]
-        if float(np.linalg.norm(p[:2] - base[:2])) > REACH_M:
-            return GiveUpReason.UNREACHABLE, f"{o} {np.linalg.norm(p[:2] - base[:2]):.2f} m from the robot base"
+        r = float(np.linalg.norm(p[:2] - base[:2]))
+        if r > REACH_M:
+            return GiveUpReason.UNREACHABLE, f"{o} {r:.2f} m from the robot base"
+        b = scene.box(o)
+        near = float(np.linalg.norm(np.clip(base[:2], b.lo[:2], b.hi[:2]) - base[:2]))
+        if near < MIN_REACH_M and scene.holding_any() == o and held(scene) is None:
+            return GiveUpReason.UNREACHABLE, f"{o} lies against the robot, {near:.2f} m from its base"
     return None
 
 
@@ -58,6 +71,47 @@ def awkward_arm(scene: Scene) -> bool:
     if np.any(rel < COMFORT_XY[0]) or np.any(rel > COMFORT_XY[1]):
         return True
     return float(-rot[2, 2]) < np.cos(np.radians(25))  # grip axis more than 25 deg off vertical
+
+
+def _elbow_slack(scene: Scene) -> float:
+    """Radians the elbow (joint 4) can still straighten before its limit."""
+    sim = scene.env.env.sim
+    m = sim.model
+    j = m.joint_name2id("robot0_joint4")
+    return float(m.jnt_range[j][1] - sim.data.qpos[m.jnt_qposadr[j]])
+
+
+def held(scene: Scene) -> str | None:
+    """The object between the fingers: `Scene.holding_any` also counts an object that only
+    leans on the arm or the robot's base (a book fallen against it), which no opening of
+    the gripper lets go; here a finger must touch it."""
+    obj = scene.holding_any()
+    if obj is None:
+        return None
+    sim = scene.env.env.sim
+    m, d = sim.model, sim.data
+    owner = scene.env._owner
+    for i in range(d.ncon):
+        c = d.contact[i]
+        for g, other in ((c.geom1, c.geom2), (c.geom2, c.geom1)):
+            if "finger" in (m.body_id2name(int(m.geom_bodyid[g])) or "") and owner[m.geom_bodyid[other]] == obj:
+                return obj
+    return None
+
+
+def elbow_straight(scene: Scene) -> bool:
+    return _elbow_slack(scene) < ELBOW_STRAIGHT
+
+
+def elbow_locked(scene: Scene) -> bool:
+    return _elbow_slack(scene) < ELBOW_LOCKED
+
+
+def toward_base(scene: Scene, dist: float) -> np.ndarray:
+    """Horizontal step of `dist` metres from the grip site toward the robot base."""
+    d = robot_base(scene)[:2] - scene.eef()[:2]
+    n = float(np.linalg.norm(d))
+    return np.zeros(3) if n < 1e-6 else np.array([*(d / n * dist), 0.0])
 
 
 def arm_in_contact(scene: Scene, held: str | None) -> bool:
@@ -127,6 +181,22 @@ def drawer_sweep(scene: Scene, joint: str) -> np.ndarray | None:
     boxes = scene.env.joint_part_boxes(joint)
     lo, hi = boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0)
     return np.array([np.minimum(lo, lo + shift), np.maximum(hi, hi + shift)])
+
+
+def proud_in_drawer(scene: Scene, joint: str, margin: float = 0.01) -> list[str]:
+    """Objects standing in the drawer of a slide `joint` whose top rises above its walls (a
+    bowl leaning on the front wall): closing the drawer jams them against the cabinet."""
+    if scene.env.joint_frame(joint)["kind"] != "slide":
+        return []
+    boxes = scene.env.joint_part_boxes(joint)
+    lo, hi = boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0)
+    out = []
+    for o in scene.env.object_names:
+        b = scene.box(o)
+        inside = np.all(b.centre[:2] > lo[:2]) and np.all(b.centre[:2] < hi[:2]) and lo[2] - 0.02 < b.lo[2] < hi[2]
+        if inside and b.hi[2] > hi[2] + margin:
+            out.append(o)
+    return out
 
 
 def under_sweep(scene: Scene, obj: str, sweep: np.ndarray, margin: float = 0.05) -> bool:

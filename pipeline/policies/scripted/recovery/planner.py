@@ -18,18 +18,21 @@ import os
 from collections import Counter
 from collections.abc import Callable
 
+import numpy as np
+
 from pipeline.policies.scripted import articulated
 from pipeline.policies.scripted.grasps import plan_grasp
 from pipeline.policies.scripted.planner import order_goal
 from pipeline.policies.scripted.recovery import checks
-from pipeline.policies.scripted.recovery.back_out import back_out
+from pipeline.policies.scripted.recovery.back_out import back_out, let_go
 from pipeline.policies.scripted.recovery.operate import operate_once
 from pipeline.policies.scripted.recovery.pick_place import pick_place_once
 from pipeline.policies.scripted.recovery.put_aside import put_aside
 from pipeline.policies.scripted.recovery.reasons import GiveUp, GiveUpReason
 from pipeline.policies.scripted.recovery.variation import RetryNoise
-from pipeline.policies.scripted.skills import Ctx, Plan, destination, free_hand
+from pipeline.policies.scripted.skills import Ctx, Plan, destination
 
+OPEN_FULL = 0.85  # a drawer this far open (of its range) lets a hand reach all of its inside
 MAX_TRIES = 4  # attempts per subgoal (each one different)
 MAX_ASIDE = 2
 FLAT_M = 0.04  # objects lower than this are grasped with the palm near the table  # times one obstruction is moved aside
@@ -52,7 +55,7 @@ def next_subgoal(ctx: Ctx, steps: list[tuple[str, ...]], goal: list[tuple[str, .
             # an implied open: only while something must still go in
             if any(g[0] == "in" and not s.satisfied(g) and articulated.openable(s.env, g[2]) == c[1] for g in goal):
                 todo.append(c)
-    held = s.holding_any()
+    held = checks.held(s)
     for c in todo:
         if c[0] in ("on", "in") and c[1] == held:
             return c
@@ -77,7 +80,7 @@ def recover(ctx: Ctx, now: Callable[[], int], budget: int | None) -> Plan:
         hopeless = checks.hopeless(s, movers)
         if hopeless is not None:
             raise GiveUp(*hopeless)
-        held = s.holding_any()
+        held = checks.held(s)
         if held is not None and not (sub[0] in ("on", "in") and sub[1] == held):
             aside[held] += 1
             if aside[held] > MAX_ASIDE + 1:
@@ -85,7 +88,7 @@ def recover(ctx: Ctx, now: Callable[[], int], budget: int | None) -> Plan:
             yield from put_aside(ctx, held, aside[held] - 1)
             continue
         if held is None and not s.gripper_open():
-            yield from free_hand(ctx)
+            yield from let_go(ctx)
         yield from back_out(ctx)
         if sub[0] in ("on", "in") and held != sub[1]:
             dest = destination(ctx, sub[1], sub[2])
@@ -109,6 +112,26 @@ def recover(ctx: Ctx, now: Callable[[], int], budget: int | None) -> Plan:
                 _debug("aside before opening", under)
                 aside[under[0]] += 1
                 yield from put_aside(ctx, under[0], aside[under[0]] - 1, forbid=[sweep])
+                continue
+        if sub[0] == "close" and tries[sub] > 0 and (joint := articulated.part_joint(s.env, sub[1])) is not None:
+            # after a failed push: an object sticking up out of the drawer jams it; pull the
+            # drawer fully out, then put it in again (flat), or aside
+            proud = [o for o in checks.proud_in_drawer(s, joint) if aside[o] < MAX_ASIDE]
+            if proud:
+                _debug("re-place before closing", proud)
+                o = proud[0]
+                aside[o] += 1
+                again = next((g for g in goal if g[0] == "in" and g[1] == o), None)
+                fr = s.env.joint_frame(joint)
+                if abs(fr["qpos"]) < OPEN_FULL * float(np.max(np.abs(fr["range"]))):
+                    # the part of it under the cabinet cannot be reached from above: pull it out
+                    _debug("open fully first", joint)
+                    yield from articulated._pull_drawer(ctx, joint)
+                    continue
+                if again is not None:
+                    yield from pick_place_once(ctx, again, aside[o])
+                else:
+                    yield from put_aside(ctx, o, aside[o] - 1)
                 continue
         if tries[sub] >= MAX_TRIES:
             raise GiveUp(GiveUpReason.RETRIES_EXHAUSTED, f"{' '.join(sub)} failed {MAX_TRIES} times")

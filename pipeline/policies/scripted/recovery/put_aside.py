@@ -26,10 +26,10 @@ def goal_points(ctx: Ctx) -> list[np.ndarray]:
 def put_aside(ctx: Ctx, obj: str, attempt: int = 0, forbid: list[np.ndarray] = ()) -> Plan:
     """`forbid`: (2, 3) boxes the spot must keep clear of (e.g. a drawer's sweep)."""
     s = ctx.scene
-    if s.holding_any() != obj:
+    if checks.held(s) != obj:
         yield from free_hand(ctx)
         yield from grasp(ctx, obj, None, choice=attempt, hover_m=0.08 + 0.03 * min(attempt, 2))
-        if s.holding_any() != obj:
+        if checks.held(s) != obj:
             return
     spot = checks.free_spot(s, obj, goal_points(ctx), forbid)
     if spot is None:
