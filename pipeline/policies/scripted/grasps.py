@@ -14,6 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pipeline.policies.scripted.pan_handle import pan_handle_grasp
+from pipeline.policies.scripted.reach import overreach
 from pipeline.policies.scripted.scene import TABLE_MARGIN, Scene
 
 MAX_SPAN = 0.068  # widest object (along the closing axis) grasped whole
@@ -134,6 +136,9 @@ def plan_grasp(scene: Scene, obj: str, dest: np.ndarray | None = None, choice: i
     handle = handle_grasp(scene, obj)
     if handle is not None and choice % 2 == 0:
         return handle
+    pan = pan_handle_grasp(scene, obj)  # a frying pan: always by its handle
+    if pan is not None:
+        return pan
     # rim grasp: radial direction whose outer finger lands clear
     ranked = []
     for theta in np.linspace(-np.pi, np.pi, 16, endpoint=False):
@@ -149,7 +154,8 @@ def plan_grasp(scene: Scene, obj: str, dest: np.ndarray | None = None, choice: i
             there[:2] += dest[:2]
             there[2] = p[2] - box.lo[2] + dest[2] + 0.015
             block += _blocked(scene, there, yaw, there[2])
-        score = block * 10 + 0.01 * abs(yaw)
+        # at the edge of the workspace the near rim keeps the elbow bent (see reach.py)
+        score = block * 10 + 0.01 * abs(yaw) + 10 * overreach(scene.env, p)
         ranked.append((score, len(ranked), Grasp(pos=p, yaw=float(yaw), rim=True)))
     ranked.sort(key=lambda r: r[:2])
     return ranked[choice % len(ranked)][2]
