@@ -18,7 +18,7 @@ from pipeline.policies.scripted.primitives import Grip
 from pipeline.policies.scripted.skills import Ctx, Plan, place_room, travel
 
 END_M = 0.005  # a slide this close to the end of its range counts as fully out
-PART_WAY_M = 0.06  # out this far, a fist fits behind the front wall (from above)
+PART_WAY_M = 0.1  # out this far (most of the way: a pull stopped short), a fist fits behind the front wall
 
 
 def cramped(ctx: Ctx, region: str, obj: str) -> bool:
