@@ -30,13 +30,19 @@ stop at success, the release's certify horizon) from the episodes' init states, 
 evaluation trial (pipeline/eval/protocol.py's `run_trial`: perturbation, gripper settle,
 the configured policy, stop at success) from the same states. Then `stage1.run` itself with 1 and with 2 local workers (spawn,
 build, everything included), and with 2 workers without LP_NUM_THREADS=1, for the
-worker speed-up. Other processes on the machine skew the numbers; rerun when quiet.
+worker speed-up. Other processes on the machine skew the wall times; rerun when quiet.
+Every mode also prints its CPU time (this process plus its render process; for the
+`stage1.run` modes, every worker and render process), which load barely changes: on a
+busy machine compare those. With its render process one worker already runs two processes,
+so on 2 cores 2 workers cannot beat 1 by more than 2 x wall(1 worker) / CPU(1 worker)
+(capped at 2): the printed bound.
 """
 
 from __future__ import annotations
 
 import argparse
 import os
+import resource
 import tempfile
 import time
 from pathlib import Path
@@ -176,15 +182,34 @@ def other_stages(env: SimEnv, policy, units, cfg, tmp: Path) -> None:
     expert.close()
 
 
+def cpu_s(pids: tuple[int, ...] = ()) -> float:
+    """CPU seconds of this process (all threads: llvmpipe's too) and the live processes `pids`."""
+    total = time.process_time()
+    for pid in pids:
+        try:
+            fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+            total += (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")  # utime, stime
+        except (OSError, IndexError, ValueError):
+            pass
+    return total
+
+
+def children_cpu_s() -> float:
+    """CPU seconds of every finished child (workers and their render processes, once reaped)."""
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return r.ru_utime + r.ru_stime
+
+
 def timed(label: str, fn, units) -> float:
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), cpu_s()
     for u in units:
         fn(u)
-    return report(label, time.perf_counter() - t0, len(units))
+    return report(label, time.perf_counter() - t0, len(units), cpu_s() - c0)
 
 
-def report(label: str, dt: float, n: int) -> float:
-    print(f"  {label:<28} {dt:8.1f} s  {n / dt * 3600:8.0f} episodes/hour", flush=True)
+def report(label: str, dt: float, n: int, cpu: float | None = None) -> float:
+    extra = f"  cpu {cpu:7.1f} s ({cpu / n:.2f} s/episode)" if cpu is not None else ""
+    print(f"  {label:<28} {dt:8.1f} s  {n / dt * 3600:8.0f} episodes/hour{extra}", flush=True)
     return dt
 
 
@@ -255,11 +280,12 @@ def render_process_modes(units, fast_cfg, fail_cfg, tmp: Path) -> tuple[float, f
         run_shard((Stage1(cfg), tuple(units)), ctx)
 
     shard(fast_cfg, units[:1], "warm")
+    render_pid = (ctx.peek("render")._proc.pid,)
     out = []
     for label, cfg in (("ours, render process", fast_cfg), ("ours, render process, failures", fail_cfg)):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), cpu_s(render_pid)
         shard(cfg, units, label.replace(" ", "_").replace(",", ""))
-        out.append(report(label, time.perf_counter() - t0, len(units)))
+        out.append(report(label, time.perf_counter() - t0, len(units), cpu_s(render_pid) - c0))
     ctx.close()
     return out[0], out[1]
 
@@ -304,19 +330,23 @@ def main() -> None:
     from rich.console import Console
 
     quiet = Console(file=open(os.devnull, "w"))
-    walls = {}
+    walls, cpus = {}, {}
     for label, workers, env_vars in (("1 worker", 1, {"LP_NUM_THREADS": "1"}), ("2 workers", 2, {"LP_NUM_THREADS": "1"}),
                                      ("2 workers, Mesa default", 2, {})):
         run_mod.WORKER_ENV = env_vars
         c = cfg.model_copy(update={
             "run": cfg.run.model_copy(update={"output_dir": tmp / label.replace(" ", "_").replace(",", "")}),
             "executor": cfg.executor.model_copy(update={"workers": workers})})
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), children_cpu_s()
         run(c, console=quiet)
         walls[label] = dt = time.perf_counter() - t0
-        print(f"  {label:<28} {dt:8.1f} s  {len(units) / dt * 3600:8.0f} episodes/hour", flush=True)
-    print(f"  speed-up 2 workers vs 1: {walls['1 worker'] / walls['2 workers']:.2f}x; "
-          f"LP_NUM_THREADS=1 vs Mesa default with 2 workers: {walls['2 workers, Mesa default'] / walls['2 workers']:.2f}x")
+        cpus[label] = children_cpu_s() - c0
+        report(label, dt, len(units), cpus[label])
+    bound = min(2.0, 2 * walls["1 worker"] / cpus["1 worker"])
+    print(f"  speed-up 2 workers vs 1: {walls['1 worker'] / walls['2 workers']:.2f}x (bound on 2 cores from 1 worker's "
+          f"CPU/wall: {bound:.2f}x); LP_NUM_THREADS=1 vs Mesa default with 2 workers: "
+          f"{walls['2 workers, Mesa default'] / walls['2 workers']:.2f}x wall, "
+          f"{cpus['2 workers, Mesa default'] / cpus['2 workers']:.2f}x CPU")
 
 
 if __name__ == "__main__":

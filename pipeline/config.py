@@ -165,7 +165,8 @@ class VideoConfig(_Strict):
     # render which episodes: failures only (all later stages need) or all of them
     render: Literal["failures", "all", "none"] = "failures"
     # fast: no multisampling, no reflections; 2.3x cheaper per software-rendered frame for a
-    # mean pixel difference of 1.4/255 (videos are watched, not fed to policies)
+    # mean pixel difference of 1.4/255 (videos are watched, not fed to policies); it also skips
+    # the geoms outside each camera's view, which changes no pixel (pipeline/sim/render.py)
     quality: Literal["fast", "standard"] = "fast"
 
     @field_validator("fps")

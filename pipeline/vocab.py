@@ -33,6 +33,7 @@ class EventKind(StrEnum):
     grasp_missed = "grasp_missed"
     grasp_lost = "grasp_lost"
     object_dropped = "object_dropped"
+    object_misplaced = "object_misplaced"  # a target let go and set down where the goal does not want it
     object_toppled = "object_toppled"
     unintended_displacement = "unintended_displacement"
     robot_contact_non_target = "robot_contact_non_target"

@@ -34,7 +34,9 @@ from pipeline.stage1.summary import collect_records, summarize, summary_table, w
 # Extra environment of each worker process. Mesa's llvmpipe starts one render thread per
 # core in every worker, so LP_NUM_THREADS=1 looked worth trying with one worker per core; on
 # a busy 2-core machine it measured slower (benchmarks/stage1_throughput.py compares both),
-# so Mesa's default is kept until a quiet measurement says otherwise.
+# and a frame costs the same CPU with 1 or 2 llvmpipe threads (benchmarks/render_cost.py:
+# the threads share only the pixel work), while Mesa's default lets a lone worker's render
+# process use the core its physics leaves idle; so Mesa's default is kept.
 WORKER_ENV: dict[str, str] = {}
 
 

@@ -9,7 +9,7 @@ import pytest
 from pipeline.config import ExecutorConfig
 from pipeline.executors import SetAside, make_executor
 from pipeline.executors.ray import RayExecutor
-from work_fns import explode, read_env, slow_write, square, write_once
+from work_fns import context_kept, explode, read_env, slow_write, square, write_once
 
 import ray  # noqa: E402,F401  (a missing ray must fail here, not skip)
 from ray.cluster_utils import Cluster  # noqa: E402
@@ -31,6 +31,10 @@ def test_ray_runs_items_relays_events_and_sets_worker_env():
     assert ex.run(square, [1, 2, 3], events.append) == [1, 4, 9]
     assert sorted(e["item"] for e in events) == [1, 2, 3]
     assert ex.run(read_env, ["LP_NUM_THREADS"]) == ["1"]
+    # an actor keeps its WorkerContext (stage 1: env, policy, render process) across items
+    (pid1, builds1, uses1), (pid2, builds2, uses2) = make_executor(
+        ExecutorConfig(kind="ray", workers=1), worker_env=WORKER_ENV).run(context_kept, [1, 2])
+    assert pid1 == pid2 and (builds1, builds2) == (1, 1) and (uses1, uses2) == (1, 2)
     with pytest.raises(Exception, match="item 2 is broken"):
         ex.run(explode, [1, 2, 3])
 

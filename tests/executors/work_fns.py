@@ -77,3 +77,22 @@ def counted(item, ctx):
     global _RUN_HERE
     _RUN_HERE += 1
     return os.getpid(), _RUN_HERE
+
+
+class _Kept:
+    builds = 0  # per worker process
+
+    def __init__(self):
+        type(self).builds += 1
+        self.uses = 0
+
+    def close(self) -> None:
+        pass
+
+
+def context_kept(item, ctx):
+    """(pid, helpers built in this worker, uses of this context's helper): a worker that keeps its
+    WorkerContext across items builds the helper once (as stage 1 does its env and render process)."""
+    h = ctx.helper("kept", _Kept)
+    h.uses += 1
+    return os.getpid(), _Kept.builds, h.uses

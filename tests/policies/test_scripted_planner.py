@@ -64,3 +64,9 @@ def test_unknown_predicate_is_rejected_by_name():
     with pytest.raises(ValueError, match="'stack'"):
         skill_for(("stack", "a", "b"))
     assert set(PREDICATES) == {"on", "in", "open", "close", "turnon", "turnoff"}
+
+
+def test_a_bowl_that_gets_another_on_it_goes_to_the_tray_first():
+    stack = ("on", "akita_black_bowl_1", "akita_black_bowl_2")
+    tray = ("in", "akita_black_bowl_2", "wooden_tray_1_contain_region")
+    assert order_goal([stack, tray], drawer_opener) == [tray, stack]

@@ -147,6 +147,28 @@ def test_fast_quality_frames_differ_only_slightly_from_standard(env):
         env.render("agentview", 128, quality="ultra")
 
 
+@pytest.mark.sim
+def test_fast_frames_skip_geoms_outside_the_view_and_stay_pixel_identical(env):
+    from pipeline.sim.render import FrameRenderer
+
+    model, data = env.env.sim.model._model, env.env.sim.data._data
+    full = FrameRenderer(model, 96, "fast", cull=False)
+    culled = FrameRenderer(model, 96, "fast")
+    assert culled.cull and not FrameRenderer(model, 96, "standard").cull  # reflections: never culled
+    groups = model.geom_group.copy()
+    env.reset_to_init(0)
+    hidden = 0
+    for a in _random_actions(30, seed=5)[::10]:
+        env.step(a)
+        for cam in ("agentview", "robot0_eye_in_hand"):
+            np.testing.assert_array_equal(culled.render(data, cam), full.render(data, cam))
+            hidden += int(culled._outside(data, cam).sum())
+    assert hidden > 0, "nothing was culled: the frustum test never fires"
+    np.testing.assert_array_equal(model.geom_group, groups)  # the physics model is left as it was
+    full.close()
+    culled.close()
+
+
 _FIXTURES_SCRIPT = """
 import json, numpy as np
 from pipeline.sim import SimEnv, tasks

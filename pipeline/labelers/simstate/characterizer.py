@@ -22,9 +22,10 @@ Category from the onset event (the event at the onset step; for a VLM onset the 
 event within 1 s): grasp_missed / grasp_lost -> grasp_failure; object_dropped ->
 placement_failure if released within PLACE_NEAR_M of its own reference (the one its
 conjunct names) or landing on it within LAND_STEPS, else grasp_failure (a drop in transit);
-object_toppled / unintended_displacement -> object_displacement when it is the target,
-collision_or_interaction_failure for another object; goal_regression (something achieved
-undone, a drawer bumped shut) -> collision_or_interaction_failure; robot_contact_non_target
+object_misplaced -> placement_failure; object_toppled / unintended_displacement ->
+object_displacement when it is the target, collision_or_interaction_failure for another
+object; goal_regression (something achieved undone, a drawer bumped shut) ->
+collision_or_interaction_failure; robot_contact_non_target
 -> environmental_obstruction for a fixture, collision_or_interaction_failure for an object;
 object_collision, part_not_operated -> collision_or_interaction_failure; no event -> other.
 Action: `pipeline.labelers.simstate.wording.recovery_action` for the object the onset event
@@ -108,6 +109,8 @@ def _category(ev: Evidence, event: SimEvent | None, fixtures: list[str]) -> Cate
         after = ev.contacts[event.step:event.step + LAND_STEPS]
         landed = any("|".join(sorted((obj, r))) in c for r in refs for c in after)
         return Category.placement_failure if near or landed else Category.grasp_failure
+    if k == EventKind.object_misplaced:
+        return Category.placement_failure
     if k in ("object_toppled", "unintended_displacement"):
         return Category.object_displacement if obj in ev.targets else Category.collision_or_interaction_failure
     if k == "goal_regression":

@@ -6,7 +6,8 @@ no rule fired) and a fallback step for reviewers when there is no onset.
 
 Rules (details and thresholds in events.py): grasp attempted near an object and not
 achieved (grasp_missed), grasp lost while still closed (grasp_lost), object released
-unsupported and falling (object_dropped), object toppled (object_toppled), an object moved
+unsupported and falling (object_dropped), a target let go and set down without goal
+progress (object_misplaced), object toppled (object_toppled), an object moved
 without having been grasped (unintended_displacement), robot contact with an object or
 fixture the goal does not involve (robot_contact_non_target), a held object hitting
 something (object_collision), a drawer or knob worked and let go without goal progress
@@ -32,7 +33,7 @@ from pipeline.labelers.simstate.events import Thresholds, detect_events
 from pipeline.records import EventKind, SimEvent
 
 ONSET_PRIORITY = (
-    "grasp_missed", "grasp_lost", "object_dropped", "object_toppled", "unintended_displacement",
+    "grasp_missed", "grasp_lost", "object_dropped", "object_misplaced", "object_toppled", "unintended_displacement",
     "robot_contact_non_target", "object_collision", "part_not_operated", "goal_regression",
 )
 IDLE_TOL_M = 0.002

@@ -14,6 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pipeline.policies.scripted.pan_handle import pan_handle_grasp
+from pipeline.policies.scripted.reach import overreach
 from pipeline.policies.scripted.scene import TABLE_MARGIN, Scene
 
 MAX_SPAN = 0.068  # widest object (along the closing axis) grasped whole
@@ -24,6 +26,10 @@ LONG_M = 0.12  # horizontal length beyond which a whole-object grasp goes to the
 TALL_M = 0.11  # objects taller than this may be carried by a handle
 HANDLE_THIN_M, HANDLE_OUT_M = 0.016, 0.055  # a handle part: thinner than this, this far out
 YAWS = np.linspace(-np.pi / 2, np.pi / 2, 12, endpoint=False)
+# a standing book: thinner than SLAB_THIN_M, taller than SLAB_TALL_M, long. It is held near
+# its top edge so the fingers stay above a compartment's walls when it goes in (slot.py)
+SLAB_THIN_M, SLAB_TALL_M, SLAB_RATIO = 0.04, 0.09, 2.5
+SLAB_GRIP_BELOW_TOP = 0.028
 
 
 @dataclass(frozen=True)
@@ -31,6 +37,14 @@ class Grasp:
     pos: np.ndarray
     yaw: float  # 0: fingers close along world y
     rim: bool
+
+
+def is_upright_slab(scene: Scene, obj: str) -> bool:
+    """A thin, tall, long object standing on its edge (a book)."""
+    xy = scene.env.object_corners(obj)[:, :2]
+    widths = [float(np.ptp(xy @ [np.cos(t), np.sin(t)])) for t in np.linspace(0, np.pi, 90, endpoint=False)]
+    thin, long = min(widths), max(widths)
+    return thin < SLAB_THIN_M and long > SLAB_RATIO * thin and scene.box(obj).size[2] > SLAB_TALL_M
 
 
 def closing_axis(yaw: float) -> np.ndarray:
@@ -96,11 +110,14 @@ def plan_grasp(scene: Scene, obj: str, dest: np.ndarray | None = None, choice: i
     # whole-object grasp: narrowest closing direction that fits
     widths = [(float(np.ptp(corners[:, :2] @ closing_axis(y)[:2])), y) for y in YAWS]
     fitting = []
+    slab = is_upright_slab(scene, obj)
     for w, yaw in widths:
         if w >= MAX_SPAN:
             continue
         mid = corners[:, :2] @ closing_axis(yaw)[:2]
         z = box.lo[2] + (min(max(0.5 * h, 0.015), h - 0.02) if h > 0.03 else 0.5 * h)
+        if slab:
+            z = box.hi[2] - SLAB_GRIP_BELOW_TOP
         pos = np.array([centre[0], centre[1], max(z, floor)])
         # centre between the extreme faces along the closing axis
         pos[:2] += closing_axis(yaw)[:2] * ((mid.max() + mid.min()) / 2 - centre[:2] @ closing_axis(yaw)[:2])
@@ -119,6 +136,9 @@ def plan_grasp(scene: Scene, obj: str, dest: np.ndarray | None = None, choice: i
     handle = handle_grasp(scene, obj)
     if handle is not None and choice % 2 == 0:
         return handle
+    pan = pan_handle_grasp(scene, obj)  # a frying pan: always by its handle
+    if pan is not None:
+        return pan
     # rim grasp: radial direction whose outer finger lands clear
     ranked = []
     for theta in np.linspace(-np.pi, np.pi, 16, endpoint=False):
@@ -134,7 +154,8 @@ def plan_grasp(scene: Scene, obj: str, dest: np.ndarray | None = None, choice: i
             there[:2] += dest[:2]
             there[2] = p[2] - box.lo[2] + dest[2] + 0.015
             block += _blocked(scene, there, yaw, there[2])
-        score = block * 10 + 0.01 * abs(yaw)
+        # at the edge of the workspace the near rim keeps the elbow bent (see reach.py)
+        score = block * 10 + 0.01 * abs(yaw) + 10 * overreach(scene.env, p)
         ranked.append((score, len(ranked), Grasp(pos=p, yaw=float(yaw), rim=True)))
     ranked.sort(key=lambda r: r[:2])
     return ranked[choice % len(ranked)][2]

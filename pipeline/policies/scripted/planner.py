@@ -2,7 +2,8 @@
 
 Input: the BDDL goal (`SimEnv.goal`, lower-case conjunct tuples) and a `Ctx`. Output: a
 generator of primitives for the whole episode. Order: open things first, then knobs,
-then pick-and-place (a container must be open before something goes in), then close.
+then pick-and-place (a container must be open before something goes in; an object that
+another goes onto is placed first), then close.
 A drawer that must receive an object is opened first even when the goal does not say
 so. The plan starts from whatever state it finds (mid-task starts from saved failure
 scenes): satisfied conjuncts are skipped, an object already in hand is placed first,
@@ -15,7 +16,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
-from pipeline.policies.scripted import articulated, knobs
+from pipeline.policies.scripted import articulated, insert, knobs
 from pipeline.policies.scripted.primitives import Move
 from pipeline.policies.scripted.skills import Ctx, Plan, free_hand, pick_place
 
@@ -49,7 +50,14 @@ def order_goal(
         thing = opener(c[2]) if c[0] == "in" else None
         if thing is not None and ("open", thing) not in steps:
             steps.append(("open", thing))
-    ranked = sorted(enumerate(steps), key=lambda ic: (_ORDER[ic[1][0]], ic[0]))
+    # an object that something else goes onto is put in its own place first (stack the bowls
+    # in the tray, not carry a stack there: a stack's bottom bowl is hard to grasp)
+    bases = {c[2] for c in steps if c[0] in ("on", "in")}
+    def rank(ic: tuple[int, tuple[str, ...]]) -> tuple:
+        i, c = ic
+        return _ORDER[c[0]], c[0] in ("on", "in") and c[1] not in bases, i
+
+    ranked = sorted(enumerate(steps), key=rank)
     return [c for _, c in ranked]
 
 
@@ -72,7 +80,9 @@ def plan_episode(ctx: Ctx) -> Plan:
                 continue
             if c in goal and s.satisfied(c):
                 continue
-            yield from skill_for(c)(ctx, c)
+            # into a container under a roof (a microwave): through its door opening
+            skill = insert.insert_into if c[0] == "in" and insert.can_insert(s, c) else skill_for(c)
+            yield from skill(ctx, c)
         if s.env.goal_satisfied():
             break
     yield from free_hand(ctx)

@@ -16,6 +16,9 @@ from pipeline.sim import SimEnv
 
 TABLE_MARGIN = 0.012  # fingertips sit ~1 cm below the grip site; keep them off the table
 GRIPPER_OPEN = 0.075  # finger-joint spread above which the gripper counts as open
+# below this spread the fingers closed on nothing (measured ~0.002); a black bowl's thin
+# rim held firmly reads 0.004-0.005, so the old 0.004 flickered to "dropped" mid-carry
+CLOSED_EMPTY = 0.003
 
 
 @dataclass(frozen=True)
@@ -106,12 +109,12 @@ class Scene:
 
     def holding(self, name: str) -> bool:
         """The fingers touch `name` and have not closed on nothing."""
-        if self.env.gripper_opening() < 0.004:
+        if self.env.gripper_opening() < CLOSED_EMPTY:
             return False
         return tuple(sorted(("robot", name))) in self.env.contacts()
 
     def holding_any(self) -> str | None:
-        if self.env.gripper_opening() < 0.004:
+        if self.env.gripper_opening() < CLOSED_EMPTY:
             return None
         for a, b in self.env.contacts():
             other = b if a == "robot" else a if b == "robot" else None

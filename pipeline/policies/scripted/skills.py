@@ -21,6 +21,7 @@ from pipeline.policies.scripted.grasps import plan_grasp
 from pipeline.policies.scripted.noise import Noise
 from pipeline.policies.scripted.primitives import Grip, Move, Primitive
 from pipeline.policies.scripted.scene import Scene
+from pipeline.policies.scripted.stack import carried  # a stack of bowls counts as held
 from pipeline.policies.scripted.truth import TruthLog
 
 Plan = Iterator[Primitive]
@@ -160,6 +161,32 @@ def destination(ctx: Ctx, obj: str, target: str) -> np.ndarray:
 
 
 def place(ctx: Ctx, obj: str, target: str) -> Plan:
+    # a book into a narrow compartment or a roofed shelf goes in its own way (slot.py,
+    # shelf.py, tip_push.py; imported here because they build on this module's `travel`)
+    from pipeline.policies.scripted.shelf import open_side, shelf_opening, slide_into_shelf
+    from pipeline.policies.scripted.slot import place_in_slot, slot_alignment
+    from pipeline.policies.scripted.tip_push import tip_and_push
+
+    into = shelf_opening(ctx, obj, target)
+    if into is not None:
+        yield from slide_into_shelf(ctx, obj, target, into)
+        return
+    into = open_side(ctx, obj, target)
+    if into is not None:  # a gap too low for the tilted hand: tip the book flat, push it in
+        yield from tip_and_push(ctx, obj, target, into)
+        return
+    angle = slot_alignment(ctx, obj, target)
+    if angle is not None:
+        yield from place_in_slot(ctx, obj, target, angle)
+        return
+    from pipeline.policies.scripted import slide_in  # builds on this module's `travel`
+
+    comp = slide_in.compartment(ctx.scene, target)
+    if comp is not None and slide_in.hand_stays_out(ctx, obj, comp):
+        # a shelf compartment, the object held by its outer end (a pan's handle): slid in
+        # from the open side, not lowered onto the board above
+        yield from slide_in.slide_in(ctx, obj, comp)
+        return
     yield from place_at(ctx, obj, place_xy(ctx, obj, target), support_ceiling(ctx.scene.env, target))
 
 
@@ -185,7 +212,7 @@ def place_at(ctx: Ctx, obj: str, xy: np.ndarray, below: float = np.inf) -> Plan:
     goal = np.array([dest[0] + hold[0], dest[1] + hold[1], release_z])
     yaw = ctx.yaw_hold
     yield from travel(ctx, goal, yaw, 1.0, max(lift_z, release_z + 0.05))
-    if s.holding_any() != obj:
+    if not carried(s, obj):
         ctx.events.append(f"dropped:{obj}")
         if ctx.truth is not None:
             ctx.truth.end_hand(obj, False)
@@ -205,10 +232,10 @@ def pick_place(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:
         if s.satisfied(conjunct):
             return
         ctx.begin("pick_place", conjunct, obj, target)
-        if s.holding_any() != obj:
+        if not carried(s, obj):
             yield from free_hand(ctx)
             yield from grasp(ctx, obj, destination(ctx, obj, target))
-            if s.holding_any() != obj:
+            if not carried(s, obj):
                 ctx.events.append(f"missed_grasp:{obj}")
                 if ctx.truth is not None:  # held for a while, then gone: a lost grasp, not a miss
                     ctx.truth.end_hand(obj, False)
@@ -216,5 +243,5 @@ def pick_place(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:
         yield from place(ctx, obj, target)
         if ctx.truth is not None:  # a no-op when place already ended the attempt
             ctx.truth.end_hand(obj, s.satisfied(conjunct))
-        if not s.satisfied(conjunct) and s.holding_any() != obj:
+        if not s.satisfied(conjunct) and not carried(s, obj):
             ctx.events.append(f"misplaced:{obj}")

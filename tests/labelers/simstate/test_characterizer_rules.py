@@ -69,6 +69,14 @@ def test_a_drop_released_near_its_reference_is_a_placement_failure_and_far_from_
     assert characterize(_loc(_event("object_dropped")), ev).failure_category is Category.grasp_failure
 
 
+def test_a_target_set_down_in_the_wrong_place_is_a_placement_failure_wherever_it_was_let_go():
+    ev = _evidence(objects=("bowl_1", "plate_1"), fixtures=())
+    ev.per_object["position"]["bowl_1"][ONSET] = (0.2, 0.0, 0.02)  # 30 cm from the plate
+    c = characterize(_loc(_event("object_misplaced")), ev)
+    assert c.failure_category is Category.placement_failure
+    assert "bowl" in c.recovery_action and "plate" in c.recovery_action
+
+
 def test_a_knocked_object_ending_next_to_the_target_is_an_l4_obstruction_named_in_the_action():
     ev = _evidence()
     _place(ev, "cup_1", (0.1, 0.0, 0.0))  # from 0.5 m away to 10 cm beside the bowl

@@ -42,10 +42,35 @@ def test_a_grasp_that_slips_while_still_closed_is_grasp_lost():
     ev = make_evidence()
     ev.gripper_command[10:] = 1.0
     ev.grasped[12:30] = ["bowl_1"] * 18
+    ev.per_object["lift"]["bowl_1"][16:30] = 0.02  # it had left the table
     for t in range(30, 60):
         ev.contacts[t] = ["bowl_1|table"]
     [e] = grasp_lost_and_dropped(ev, TH)
     assert (e.kind, e.step) == ("grasp_lost", 30)
+
+
+def test_a_squeeze_that_never_lifts_and_slips_out_closed_is_a_missed_grasp_at_the_close():
+    ev = make_evidence()
+    ev.per_object["eef_distance"]["bowl_1"][:] = 0.03
+    ev.gripper_command[10:50] = 1.0
+    ev.grasped[20:26] = ["bowl_1"] * 6  # in hand, a one-state flicker, in hand again: one hold
+    ev.grasped[27:35] = ["bowl_1"] * 8
+    ev.per_object["lift"]["bowl_1"][20:35] = 0.003  # never left the table
+    assert grasp_lost_and_dropped(ev, TH) == []
+    [e] = grasp_missed(ev, TH)
+    assert (e.kind, e.step, e.object) == ("grasp_missed", 10, "bowl_1")
+
+
+def test_a_one_state_touch_after_the_release_does_not_hide_the_release():
+    ev = make_evidence()
+    ev.gripper_command[10:40] = 1.0
+    ev.grasped[12:42] = ["bowl_1"] * 30
+    ev.grasped[43] = "bowl_1"  # a finger brushes it once as it settles
+    ev.per_object["lift"]["bowl_1"][12:42] = 0.05
+    for t in range(44, 60):
+        ev.contacts[t] = ["bowl_1|table"]
+    [e] = grasp_lost_and_dropped(ev, TH)
+    assert (e.kind, e.step) == ("object_misplaced", 40)
 
 
 def test_an_unsupported_release_that_falls_is_a_drop_at_the_open_command():
@@ -57,13 +82,34 @@ def test_an_unsupported_release_that_falls_is_a_drop_at_the_open_command():
     assert (e.kind, e.step, e.object) == ("object_dropped", 40, "bowl_1")
 
 
-def test_a_release_while_resting_on_a_support_is_not_a_drop():
+def test_a_release_on_the_goal_that_raises_progress_is_neither_a_drop_nor_a_misplacement():
     ev = make_evidence()
     ev.gripper_command[10:40] = 1.0
     ev.grasped[12:42] = ["bowl_1"] * 30
     ev.per_object["lift"]["bowl_1"][12:42] = 0.05
     for t in range(38, 60):
         ev.contacts[t] = ["bowl_1|plate_1"]
+    ev.goal_progress[44:] = 1.0
+    assert grasp_lost_and_dropped(ev, TH) == []
+
+
+def test_a_target_set_down_without_goal_progress_is_misplaced_at_the_open_command():
+    ev = make_evidence()
+    ev.gripper_command[10:40] = 1.0
+    ev.grasped[12:42] = ["bowl_1"] * 30
+    ev.per_object["lift"]["bowl_1"][12:42] = 0.05
+    for t in range(38, 60):
+        ev.contacts[t] = ["bowl_1|table"]  # set down beside the plate: supported, no fall
+    [e] = grasp_lost_and_dropped(ev, TH)
+    assert (e.kind, e.step, e.object) == ("object_misplaced", 40, "bowl_1")
+
+
+def test_a_non_target_set_down_anywhere_is_no_misplacement():
+    ev = make_evidence()
+    ev.gripper_command[10:40] = 1.0
+    ev.grasped[12:42] = ["cup_1"] * 30  # the goal does not want the cup anywhere
+    for t in range(38, 60):
+        ev.contacts[t] = ["cup_1|table"]
     assert grasp_lost_and_dropped(ev, TH) == []
 
 
@@ -157,3 +203,59 @@ def test_an_object_that_began_tipping_in_the_hand_is_no_topple():
     ev.per_object["tilt_deg"]["cup_1"][15:] = 20.0  # tilted while held
     ev.per_object["tilt_deg"]["cup_1"][55:] = 60.0  # lies on its side long after the release
     assert toppled(ev, TH) == []
+
+
+def test_a_target_that_goes_over_while_the_fingers_close_on_it_is_that_grasp_not_a_topple():
+    ev = make_evidence()
+    ev.per_object["eef_distance"]["bowl_1"][:] = 0.05
+    ev.gripper_command[30:50] = 1.0
+    ev.per_object["tilt_deg"]["bowl_1"][20:] = [min(80, 3 * (t - 19)) for t in range(20, 60)]  # 45 deg at 34
+    assert toppled(ev, TH) == []
+    [e] = detect_events(ev)
+    assert (e.kind, e.step) == ("grasp_missed", 30)
+
+
+def test_a_target_knocked_over_before_the_fingers_close_is_a_topple():
+    ev = make_evidence()
+    ev.per_object["eef_distance"]["bowl_1"][:] = 0.05
+    ev.gripper_command[45:55] = 1.0
+    ev.per_object["tilt_deg"]["bowl_1"][20:] = [min(80, 5 * (t - 19)) for t in range(20, 60)]  # 45 deg at 28
+    [e] = toppled(ev, TH)
+    assert (e.kind, e.step, e.object) == ("object_toppled", 22, "bowl_1")
+
+
+def test_a_pushed_bystander_is_displaced_from_the_first_motion_under_the_hand_not_its_last_rest():
+    ev = make_evidence()
+    for t in range(10, 40):
+        ev.contacts[t] = ["cup_1|robot"]
+    jiggle = ev.per_object["displacement"]["cup_1"]
+    jiggle[12:30] = [0.004, 0.002] * 9  # wobbles in place under the hand, back below motion_m
+    jiggle[30:] = 0.03  # then slides
+    [e] = [x for x in detect_events(ev) if x.kind == "unintended_displacement"]
+    assert (e.object, e.step) == ("cup_1", 12)
+
+
+def test_a_goal_predicate_flickering_true_once_after_a_release_is_no_placement():
+    ev = make_evidence()
+    ev.gripper_command[10:40] = 1.0
+    ev.grasped[12:42] = ["bowl_1"] * 30
+    for t in range(42, 60):
+        ev.contacts[t] = ["bowl_1|table"]
+    ev.goal_progress[45] = 1.0  # one state
+    [e] = grasp_lost_and_dropped(ev, TH)
+    assert (e.kind, e.step) == ("object_misplaced", 40)
+    ev.goal_progress[45:] = 1.0  # it stays: placed
+    assert grasp_lost_and_dropped(ev, TH) == []
+
+
+def test_a_close_that_squeezed_an_object_beside_a_drawer_is_a_missed_grasp_not_a_fist_on_the_drawer():
+    ev = make_evidence(goal=(("open", "cabinet_1"), ("in", "bowl_1", "cabinet_1")), fixtures=("cabinet_1",))
+    ev.per_object["eef_distance"]["bowl_1"][:] = 0.05
+    ev.gripper_command[10:50] = 1.0
+    ev.grasped[20:28] = ["bowl_1"] * 8  # squeezed in the drawer, never raised, slipped out
+    for t in range(28, 40):
+        ev.contacts[t] = ["cabinet_1|robot"]  # the closing hand then pressed on the drawer
+    [e] = grasp_missed(ev, TH)
+    assert (e.step, e.object) == (10, "bowl_1")
+    ev.grasped[20:28] = [""] * 8  # nothing held: a fist on the drawer, no grasp attempt
+    assert grasp_missed(ev, TH) == []

@@ -8,8 +8,9 @@ every skill; when it cannot, it stops with a `GiveUpReason`.
     policy.give_up_reason  # None, or why it stopped (see also `reason_after(success)`)
 
 Skills, one per file: `pick_place` (pose-aware grasp, different on retry), `operate`
-(drawers, doors, knobs), `put_aside`, `back_out`; `checks` reads the scene; `planner`
-decides; `expert` is the `Policy`.
+(drawers, doors, knobs), `put_aside`, `back_out`, and the shared `scripted.insert` (into a
+roofed container through its door, e.g. a mug into the microwave); `checks` reads the
+scene; `planner` decides; `expert` is the `Policy`.
 """
 
 from __future__ import annotations

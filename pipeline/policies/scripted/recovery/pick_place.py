@@ -8,6 +8,7 @@ retry shift of `variation.RetryNoise`. The planner calls it again from the live 
 from __future__ import annotations
 
 from pipeline.policies.scripted.recovery import checks
+from pipeline.policies.scripted.stack import carried
 from pipeline.policies.scripted.skills import Ctx, Plan, destination, free_hand, grasp, place
 
 
@@ -15,11 +16,11 @@ def pick_place_once(ctx: Ctx, conjunct: tuple[str, ...], attempt: int) -> Plan:
     _, obj, target = conjunct
     s = ctx.scene
     ctx.begin("pick_place", conjunct, obj, target)
-    if checks.held(s) != obj:
+    if not carried(s, obj, checks.held(s)):
         yield from free_hand(ctx)
         yield from grasp(ctx, obj, destination(ctx, obj, target), choice=attempt,
                          hover_m=0.08 + 0.03 * min(attempt, 2))
-        if checks.held(s) != obj:
+        if not carried(s, obj, checks.held(s)):
             ctx.events.append(f"missed_grasp:{obj}")
             if ctx.truth is not None:
                 ctx.truth.end_hand(obj, False)
@@ -27,5 +28,5 @@ def pick_place_once(ctx: Ctx, conjunct: tuple[str, ...], attempt: int) -> Plan:
     yield from place(ctx, obj, target)
     if ctx.truth is not None:
         ctx.truth.end_hand(obj, s.satisfied(conjunct))
-    if not s.satisfied(conjunct) and checks.held(s) != obj:
+    if not s.satisfied(conjunct) and not carried(s, obj, checks.held(s)):
         ctx.events.append(f"misplaced:{obj}")

@@ -20,7 +20,7 @@ from collections.abc import Callable
 
 import numpy as np
 
-from pipeline.policies.scripted import articulated
+from pipeline.policies.scripted import articulated, insert
 from pipeline.policies.scripted.grasps import plan_grasp
 from pipeline.policies.scripted.planner import order_goal
 from pipeline.policies.scripted.recovery import checks
@@ -31,6 +31,7 @@ from pipeline.policies.scripted.recovery.put_aside import put_aside
 from pipeline.policies.scripted.recovery.reasons import GiveUp, GiveUpReason
 from pipeline.policies.scripted.recovery.variation import RetryNoise
 from pipeline.policies.scripted.skills import Ctx, Plan, destination
+from pipeline.policies.scripted.stack import carried
 
 OPEN_FULL = 0.85  # a drawer this far open (of its range) lets a hand reach all of its inside
 MAX_TRIES = 4  # attempts per subgoal (each one different)
@@ -57,7 +58,7 @@ def next_subgoal(ctx: Ctx, steps: list[tuple[str, ...]], goal: list[tuple[str, .
                 todo.append(c)
     held = checks.held(s)
     for c in todo:
-        if c[0] in ("on", "in") and c[1] == held:
+        if c[0] in ("on", "in") and carried(s, c[1], held):
             return c
     return todo[0] if todo else None
 
@@ -81,6 +82,8 @@ def recover(ctx: Ctx, now: Callable[[], int], budget: int | None) -> Plan:
         if hopeless is not None:
             raise GiveUp(*hopeless)
         held = checks.held(s)
+        if held is not None and sub[0] in ("on", "in") and carried(s, sub[1], held):
+            held = sub[1]  # the hand holds the stack whose bottom is the subgoal's object
         if held is not None and not (sub[0] in ("on", "in") and sub[1] == held):
             aside[held] += 1
             if aside[held] > MAX_ASIDE + 1:
@@ -90,7 +93,7 @@ def recover(ctx: Ctx, now: Callable[[], int], budget: int | None) -> Plan:
         if held is None and not s.gripper_open():
             yield from let_go(ctx)
         yield from back_out(ctx)
-        if sub[0] in ("on", "in") and held != sub[1]:
+        if sub[0] in ("on", "in") and held != sub[1] and not insert.can_insert(s, sub):
             dest = destination(ctx, sub[1], sub[2])
             in_way = checks.blockers(s, sub[1], dest, keep)
             # whatever stands where the palm goes down: after a failed grasp, or at once for
@@ -137,7 +140,9 @@ def recover(ctx: Ctx, now: Callable[[], int], budget: int | None) -> Plan:
             raise GiveUp(GiveUpReason.RETRIES_EXHAUSTED, f"{' '.join(sub)} failed {MAX_TRIES} times")
         if isinstance(ctx.noise, RetryNoise):
             ctx.noise.attempt = tries[sub]
-        if sub[0] in ("on", "in"):
+        if sub[0] == "in" and insert.can_insert(s, sub):
+            yield from insert.insert(ctx, sub)  # through a door opening, under a roof
+        elif sub[0] in ("on", "in"):
             yield from pick_place_once(ctx, sub, tries[sub])
         else:
             yield from operate_once(ctx, sub)
