@@ -77,11 +77,11 @@ def is_closed_enough(env: SimEnv, name: str) -> bool:
     return not env.object_state(name).is_open()
 
 
-def _open_sign(rng: np.ndarray) -> float:
+def open_sign(rng: np.ndarray) -> float:
     return -1.0 if abs(rng[0]) > abs(rng[1]) else 1.0
 
 
-def _handle(env: SimEnv, joint: str, pull: np.ndarray) -> tuple[np.ndarray, int, float]:
+def handle_box(env: SimEnv, joint: str, pull: np.ndarray) -> tuple[np.ndarray, int, float]:
     """Outermost box of the moving part along `pull`, the world axis index, and its sign."""
     k = int(np.argmax(np.abs(pull[:2])))
     s = float(np.sign(pull[k]))
@@ -121,10 +121,10 @@ def _pull_drawer(ctx: Ctx, joint: str) -> Plan:
     """Tilt the hand to point at the drawer, fingers above and below the handle bar, grip, pull."""
     s, env = ctx.scene, ctx.scene.env
     fr = env.joint_frame(joint)
-    sign = _open_sign(fr["range"])
+    sign = open_sign(fr["range"])
     pull = fr["axis"] * sign
     pull = pull / np.linalg.norm(pull)
-    box, k, d = _handle(env, joint, pull)
+    box, k, d = handle_box(env, joint, pull)
     front = box[1, k] if d > 0 else box[0, k]
     back = box[0, k] if d > 0 else box[1, k]
     offset = ctx.noise.grasp_offset() * [0.5, 0.5, 0.5]
@@ -158,7 +158,7 @@ def _pull_drawer(ctx: Ctx, joint: str) -> Plan:
     yield ctx.move(s.eef() + [0, 0, 0.06], tol=0.02, rot_tol=0.15, max_steps=40, label="untilt")
 
 
-def _front_panel(env: SimEnv, joint: str, k: int, d: float) -> np.ndarray:
+def front_panel(env: SimEnv, joint: str, k: int, d: float) -> np.ndarray:
     """The drawer's front panel: the outermost of the part's boxes that span most of the
     drawer's width (the handle and its posts are narrow)."""
     boxes = env.joint_part_boxes(joint)
@@ -171,9 +171,9 @@ def _front_panel(env: SimEnv, joint: str, k: int, d: float) -> np.ndarray:
 def _push_drawer(ctx: Ctx, joint: str) -> Plan:
     s, env = ctx.scene, ctx.scene.env
     fr = env.joint_frame(joint)
-    sign = _open_sign(fr["range"])
+    sign = open_sign(fr["range"])
     pull = fr["axis"] * sign
-    box, k, d = _handle(env, joint, pull)
+    box, k, d = handle_box(env, joint, pull)
     if (box[0, 2] + box[1, 2]) / 2 < s.table_height() + LOW_DRAWER_M:
         yield from _push_low_drawer(ctx, joint)
         return
@@ -205,10 +205,10 @@ def _push_low_drawer(ctx: Ctx, joint: str) -> Plan:
     wrist trails behind, the forearm stays off the cabinet), and pushes past closed."""
     s, env = ctx.scene, ctx.scene.env
     fr = env.joint_frame(joint)
-    sign = _open_sign(fr["range"])
+    sign = open_sign(fr["range"])
     pull = fr["axis"] * sign
-    box, k, d = _handle(env, joint, pull)
-    panel = _front_panel(env, joint, k, d)
+    box, k, d = handle_box(env, joint, pull)
+    panel = front_panel(env, joint, k, d)
     face = panel[1, k] if d > 0 else panel[0, k]
     part_top = float(env.joint_part_boxes(joint)[:, 1, 2].max())
     pos = (box[0] + box[1]) / 2
@@ -242,7 +242,7 @@ def _swing_door(ctx: Ctx, joint: str, opening: bool) -> Plan:
     """Sweep a hinged panel with a closed hand pressing on its face, in small arcs."""
     s, env = ctx.scene, ctx.scene.env
     fr = env.joint_frame(joint)
-    sign = _open_sign(fr["range"])
+    sign = open_sign(fr["range"])
     goal_q = fr["range"][0] if sign < 0 else fr["range"][1]
     goal_q = 0.8 * goal_q if opening else -sign * 0.05
     q = fr["qpos"]

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.policies.scripted.articulated import FINGER_HALF, _front_panel, _handle, _open_sign, open_part, part_joint
+from pipeline.policies.scripted.articulated import FINGER_HALF, front_panel, handle_box, open_sign, open_part, part_joint
 from pipeline.policies.scripted.primitives import Grip
 from pipeline.policies.scripted.skills import Ctx, Plan, place_room, travel
 
@@ -28,7 +28,7 @@ def cramped(ctx: Ctx, region: str, obj: str) -> bool:
     if joint is None or env.joint_frame(joint)["kind"] != "slide" or not env.object_state(region).is_open():
         return False
     fr = env.joint_frame(joint)
-    if _open_sign(fr["range"]) * fr["qpos"] >= float(np.max(np.abs(fr["range"]))) - END_M:
+    if open_sign(fr["range"]) * fr["qpos"] >= float(np.max(np.abs(fr["range"]))) - END_M:
         return False
     return not place_room(ctx, obj, region)
 
@@ -40,7 +40,7 @@ def part_way_out(env, region: str) -> bool:
     if joint is None or env.joint_frame(joint)["kind"] != "slide" or env.object_state(region).is_open():
         return False
     fr = env.joint_frame(joint)
-    return _open_sign(fr["range"]) * fr["qpos"] >= PART_WAY_M
+    return open_sign(fr["range"]) * fr["qpos"] >= PART_WAY_M
 
 
 def finish_opening(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:
@@ -71,11 +71,11 @@ def make_room(ctx: Ctx, conjunct: tuple[str, ...], obj: str) -> Plan:
 def _drag_out(ctx: Ctx, joint: str) -> Plan:
     s, env = ctx.scene, ctx.scene.env
     fr = env.joint_frame(joint)
-    sign = _open_sign(fr["range"])
+    sign = open_sign(fr["range"])
     pull = fr["axis"] * sign
     pull = pull / np.linalg.norm(pull)
-    box, k, d = _handle(env, joint, pull)
-    panel = _front_panel(env, joint, k, d)
+    box, k, d = handle_box(env, joint, pull)
+    panel = front_panel(env, joint, k, d)
     face = panel[1, k] if d > 0 else panel[0, k]
     boxes = env.joint_part_boxes(joint)
     width = boxes[:, 1, 1 - k] - boxes[:, 0, 1 - k]
