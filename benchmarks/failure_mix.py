@@ -49,7 +49,10 @@ def rows(mixes: list[dict]) -> list[tuple[str, list[str]]]:
     for s in sorted({s for m in mixes for s in m["suites"]}):
         out.append((f"failed: {s}", [f"{m['suites'].get(s, [0, 0])[0]}/{m['suites'].get(s, [0, 0])[1]}" for m in mixes]))
     for part in ("outcome", "category", "level"):
-        for k in sorted({k for m in mixes for k in m[part]}, key=lambda k: -sum(m[part].get(k, 0) for m in mixes)):
+        keys = {k for m in mixes for k in m[part]}
+        # levels in order; outcomes and categories most frequent first
+        order = sorted(keys) if part == "level" else sorted(keys, key=lambda k: -sum(m[part].get(k, 0) for m in mixes))
+        for k in order:
             out.append((f"{part}: {k}", [str(m[part].get(k, 0)) for m in mixes]))
     out.append(("failed without a usable truth", [str(m["no_truth"]) for m in mixes]))
     return out
