@@ -189,8 +189,9 @@ def step_at_time(time_s: float, control_hz: int = 20) -> int:
 
 
 # ---- stage 2: localization -------------------------------------------------------------
-class SimEvent(Record):
-    """Something the simulator-state analysis saw happen (evidence for people and rules)."""
+class EventFields(BaseModel):
+    """The fields of a simulator event, shared by `SimEvent` and the review page's copy of
+    it (`review.proposal.ContextEvent`), so the two cannot drift apart."""
 
     step: int
     time_s: float
@@ -200,12 +201,21 @@ class SimEvent(Record):
     detail: str = ""
 
 
-class Phases(Record):
+class PhaseFields(BaseModel):
     """Half-open step ranges [start, end) of the three phases of a failed episode."""
 
     pre: tuple[int, int]
     during: tuple[int, int]
     post: tuple[int, int]
+
+
+# the shared fields come after `schema_version` (Record last in the bases keeps the column order)
+class SimEvent(EventFields, Record):
+    """Something the simulator-state analysis saw happen (evidence for people and rules)."""
+
+
+class Phases(PhaseFields, Record):
+    """Half-open step ranges [start, end) of the three phases of a failed episode."""
 
 
 class Localization(Record):

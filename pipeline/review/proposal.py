@@ -12,7 +12,8 @@ from __future__ import annotations
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
-from pipeline.vocab import Category, EventKind, Level
+from pipeline.records import EventFields, PhaseFields
+from pipeline.vocab import Category, Level
 
 # the proposal's values, as opposed to its model/prompt version
 VALUE_FIELDS = ("fail_time_s", "fail_step", "recovery_level", "failure_category", "recovery_action")
@@ -49,21 +50,12 @@ class Proposal(_Strict):
     prompt_hash: str | None = None
 
 
-class ContextEvent(_Strict):
+class ContextEvent(EventFields, _Strict):
     """A simulator event shown on the timeline (records.SimEvent without its schema_version)."""
 
-    step: int
-    time_s: float
-    kind: EventKind
-    object: str | None = None
-    other: str | None = None
-    detail: str = ""
 
-
-class ContextPhases(_Strict):
-    pre: tuple[int, int]
-    during: tuple[int, int]
-    post: tuple[int, int]
+class ContextPhases(PhaseFields, _Strict):
+    """The episode's phases on the timeline (records.Phases without its schema_version)."""
 
 
 class ReviewContext(_Strict):
