@@ -18,8 +18,8 @@ import numpy as np
 
 from pipeline.policies.scripted.grasps import SLAB_THIN_M, is_upright_slab
 from pipeline.policies.scripted.primitives import Grip
-from pipeline.policies.scripted.slot import footprint, has_roof, region_box
-from pipeline.policies.scripted.skills import CARRY_CLEARANCE, Ctx, Plan, travel
+from pipeline.policies.scripted.skills import CARRY_CLEARANCE, Ctx, Plan, region_box, travel
+from pipeline.policies.scripted.slot import footprint, has_roof
 
 PALM_HALF_M = 0.115  # grip site above the table when the hand points sideways
 PLANK_GAP_M = 0.015  # book's lower face above the shelf floor while pushed in

@@ -99,6 +99,12 @@ def grasp(ctx: Ctx, obj: str, dest: np.ndarray | None = None, choice: int = 0, h
     yield ctx.move(s.eef() + [0, 0, 0.1], gripper=1.0, speed=0.6, yaw=g.yaw, tol=0.02, label="pick_lift")
 
 
+def region_box(env, region: str) -> tuple[np.ndarray, np.ndarray]:
+    """Centre and half extents (world axes) of a region site."""
+    r = env.region(region)
+    return r["pos"], np.abs(r["mat"]) @ r["size"]
+
+
 def place_xy(ctx: Ctx, obj: str, target: str) -> np.ndarray:
     return _place_choice(ctx, obj, target)[0]
 
@@ -119,7 +125,7 @@ def _place_choice(ctx: Ctx, obj: str, target: str) -> tuple[np.ndarray, int]:
         return xy, 0
     r = s.env.region(target)
     drawer = bool(r["joints"])
-    half = np.abs(r["mat"]) @ r["size"]
+    _, half = region_box(s.env, target)
     top = r["pos"][2] + half[2]
     size = s.box(obj).size[:2]
     # other objects already standing in the region (the second moka pot on a stove)

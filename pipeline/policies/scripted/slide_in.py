@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pipeline.policies.scripted.primitives import Grip
-from pipeline.policies.scripted.skills import Ctx, Plan, travel
+from pipeline.policies.scripted.skills import Ctx, Plan, region_box, travel
 from pipeline.policies.scripted.stack import carried
 
 HAND_ROOM_M = 0.15  # a board lower than this above the floor leaves no room to lower a hand in
@@ -38,12 +38,6 @@ class Compartment:
     out: np.ndarray  # unit horizontal vector from inside towards the open side
 
 
-def _region_box(env, region: str) -> tuple[np.ndarray, np.ndarray]:
-    r = env.region(region)
-    half = np.abs(r["mat"]) @ r["size"]
-    return r["pos"] - half, r["pos"] + half
-
-
 def compartment(scene, region: str) -> Compartment | None:
     env = scene.env
     if not env.is_region(region) or env.region(region)["joints"]:
@@ -51,7 +45,8 @@ def compartment(scene, region: str) -> Compartment | None:
     parent = env.region(region)["parent"]
     if parent not in env.fixture_names:
         return None
-    lo, hi = _region_box(env, region)
+    pos, half = region_box(env, region)
+    lo, hi = pos - half, pos + half
     boxes = env.object_boxes(parent)
     centre = (lo + hi) / 2
     over = [b for b in boxes if np.all(b[0, :2] <= centre[:2]) and np.all(b[1, :2] >= centre[:2])]

@@ -18,7 +18,7 @@ import numpy as np
 
 from pipeline.policies.scripted.grasps import is_upright_slab
 from pipeline.policies.scripted.primitives import Grip
-from pipeline.policies.scripted.skills import CARRY_CLEARANCE, Ctx, Plan, travel
+from pipeline.policies.scripted.skills import CARRY_CLEARANCE, Ctx, Plan, region_box, travel
 
 FIT_MARGIN = 0.004  # slab edge to compartment wall, each side, at the least
 RELEASE_GAP = 0.008  # slab bottom above the compartment floor when the fingers open
@@ -41,12 +41,6 @@ def footprint(corners: np.ndarray) -> tuple[float, float, float, np.ndarray]:
     a, b = xy @ u, xy @ v
     centre = u * (a.max() + a.min()) / 2 + v * (b.max() + b.min()) / 2
     return long_theta, float(np.ptp(a)), thin, centre
-
-
-def region_box(env, target: str) -> tuple[np.ndarray, np.ndarray]:
-    """Centre and half extents (world axes) of a region site."""
-    r = env.region(target)
-    return r["pos"], np.abs(r["mat"]) @ r["size"]
 
 
 def has_roof(env, target: str, obj: str) -> bool:

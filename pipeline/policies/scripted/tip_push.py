@@ -16,8 +16,8 @@ import numpy as np
 
 from pipeline.policies.scripted.primitives import Grip
 from pipeline.policies.scripted.scene import TABLE_MARGIN
-from pipeline.policies.scripted.skills import CARRY_CLEARANCE, Ctx, Plan, travel
-from pipeline.policies.scripted.slot import footprint, region_box
+from pipeline.policies.scripted.skills import CARRY_CLEARANCE, Ctx, Plan, region_box, travel
+from pipeline.policies.scripted.slot import footprint
 
 STAND_OUT_M = 0.10  # book's footprint centre this far in front of the opening when stood up
 TIP_PUSH_M = 0.10  # how far the fingers push the book's top to tip it
