@@ -88,15 +88,8 @@ def held(scene: Scene) -> str | None:
     obj = scene.holding_any()
     if obj is None:
         return None
-    sim = scene.env.env.sim
-    m, d = sim.model, sim.data
-    owner = scene.env._owner
-    for i in range(d.ncon):
-        c = d.contact[i]
-        for g, other in ((c.geom1, c.geom2), (c.geom2, c.geom1)):
-            if "finger" in (m.body_id2name(int(m.geom_bodyid[g])) or "") and owner[m.geom_bodyid[other]] == obj:
-                return obj
-    return None
+    left, right = scene.env.finger_contacts()
+    return obj if obj in left | right else None
 
 
 def elbow_straight(scene: Scene) -> bool:
