@@ -15,7 +15,8 @@ not (a LIBERO scene: ~345k triangles, most of a frame's cost), and MuJoCo hands 
 visible-group geom. A "fast" frame skips the geoms whose bounding sphere lies wholly outside
 the camera's view (about half of the triangles for the wrist camera). Without reflections and
 shadow-casting lights such a geom cannot touch a pixel, so the frame is the same, pixel for
-pixel (tests/sim/test_render_cull.py); with either, nothing is culled.
+pixel (tests/sim/test_env.py, test_fast_frames_skip_geoms_outside_the_view_and_stay_pixel_identical);
+with either, nothing is culled.
 """
 
 from __future__ import annotations
