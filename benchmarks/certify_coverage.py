@@ -147,7 +147,13 @@ def main() -> None:
     ap.add_argument("--chunk", type=int, default=8)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--out", type=Path, default=OUT, help="output stem (.md, .json, .png)")
+    ap.add_argument("--match", action="append", default=[],
+                    help="only scenes whose id (suite/task/episode/step_NNNN) contains this text; repeatable")
+    ap.add_argument("--experts", default=",".join(EXPERTS), help="comma-separated subset of: " + ", ".join(EXPERTS))
     args = ap.parse_args()
+    experts = [e for e in args.experts.split(",") if e]
+    if not experts or set(experts) - set(EXPERTS):
+        raise SystemExit(f"--experts {args.experts!r}: choose from {', '.join(EXPERTS)}")
 
     from pipeline.release.manifest import read_manifest
 
@@ -155,31 +161,37 @@ def main() -> None:
     rows = read_manifest(release / "scenarios.parquet")
     groups: dict[tuple, list[dict]] = defaultdict(list)
     for r in rows:
+        scene = f"{r.suite}/{r.task}/{r.episode_id}/step_{r.step:04d}"
+        if args.match and not any(m in scene for m in args.match):
+            continue
         groups[(r.suite, r.task, (release / r.bddl_path).read_bytes())].append(
-            {"scene": f"{r.suite}/{r.task}/{r.episode_id}/step_{r.step:04d}", "suite": r.suite, "task": r.task,
+            {"scene": scene, "suite": r.suite, "task": r.task,
              "instruction": r.instruction, "level": r.level, "category": r.category,
              "bddl_path": r.bddl_path, "state_path": r.state_path})
-    units = [(str(release), g, e, args.tries, args.horizon, args.chunk) for g in groups.values() for e in EXPERTS]
+    units = [(str(release), g, e, args.tries, args.horizon, args.chunk) for g in groups.values() for e in experts]
+    n_scenes = sum(len(g) for g in groups.values())
+    if not n_scenes:
+        raise SystemExit(f"{release / 'scenarios.parquet'}: no scene matches --match {args.match}")
     console = Console()
     results: list[dict] = []
     t0 = time.perf_counter()
     with Progress(console=console) as progress, ProcessPoolExecutor(args.workers) as pool:
-        bar = progress.add_task("certificates", total=2 * len(rows))
+        bar = progress.add_task("certificates", total=len(experts) * n_scenes)
         for f in as_completed([pool.submit(certify_unit, *u) for u in units]):
             results += f.result()
             progress.update(bar, completed=len(results))
     wall = time.perf_counter() - t0
     table = shares(results)
     reasons = Counter(r["reason"] for r in results if r["expert"] == "recovery" and not r["certified"])
-    out = Table(title=f"certified scenes of {release} ({len(rows)} scenes)")
+    out = Table(title=f"certified scenes of {release} ({n_scenes} scenes)")
     for col in ("group", "scenes", "plain expert", "recovery expert", "change"):
         out.add_column(col)
     for dim, val, n, c in table:
         out.add_row("all" if dim == "all" else f"{dim}: {val}", str(n), pct(c["plain"], n), pct(c["recovery"], n),
                     f"{(c['recovery'] - c['plain']) / n:+.0%}")
     console.print(out)
-    note = (f"Release `{release}`: {len(rows)} scenes; each expert up to {args.tries} tries, horizon {args.horizon}, "
-            f"chunk {args.chunk}; {2 * len(rows)} certificates in {wall / 60:.1f} min on {args.workers} workers.")
+    note = (f"Release `{release}`: {n_scenes} scenes; each expert up to {args.tries} tries, horizon {args.horizon}, "
+            f"chunk {args.chunk}; {len(results)} certificates in {wall / 60:.1f} min on {args.workers} workers.")
     md = markdown(table, reasons, note)
     console.print(f"recovery expert, not certified by reason: {dict(reasons.most_common())}")
     from pipeline.atomic import write_text
