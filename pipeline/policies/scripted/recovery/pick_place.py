@@ -8,6 +8,7 @@ retry shift of `variation.RetryNoise`. The planner calls it again from the live 
 from __future__ import annotations
 
 from pipeline.policies.scripted.recovery import checks
+from pipeline.policies.scripted.recovery.lying_cup import grasp_by_handle, lying_handle_grasp
 from pipeline.policies.scripted.stack import carried
 from pipeline.policies.scripted.skills import Ctx, Plan, destination, free_hand, grasp, place
 
@@ -18,8 +19,12 @@ def pick_place_once(ctx: Ctx, conjunct: tuple[str, ...], attempt: int) -> Plan:
     ctx.begin("pick_place", conjunct, obj, target)
     if not carried(s, obj, checks.held(s)):
         yield from free_hand(ctx)
-        yield from grasp(ctx, obj, destination(ctx, obj, target), choice=attempt,
-                         hover_m=0.08 + 0.03 * min(attempt, 2))
+        handle = lying_handle_grasp(s, obj)  # a mug on its side: by its handle
+        if handle is not None:
+            yield from grasp_by_handle(ctx, obj, handle, hover_m=0.08 + 0.03 * min(attempt, 2))
+        else:
+            yield from grasp(ctx, obj, destination(ctx, obj, target), choice=attempt,
+                             hover_m=0.08 + 0.03 * min(attempt, 2))
         if not carried(s, obj, checks.held(s)):
             ctx.events.append(f"missed_grasp:{obj}")
             if ctx.truth is not None:

@@ -1,0 +1,116 @@
+"""Skill: grasp a mug lying on its side by its handle.
+
+A lying mug is wider (~9.5 cm) than the open fingers, its rim faces sideways, and its
+mouth is covered from above by its own wall: no top-down rim or whole grasp holds it
+(measured, libero_10 LIVING_ROOM_SCENE5: the fingers closed on nothing 4 times out of 4).
+Its handle's outer bar is thin and stands off the body: the fingers close across the bar,
+horizontally and square to the mug's axis, opened only a little wider than the bar so the
+inner finger fits into the handle's hole when the handle lies flat. The mug then hangs
+from its handle (still lying) and is set down on its side where its body origin goes.
+Objects are upright in their own frame (LIBERO's convention: local z up).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from pipeline.policies.scripted.grasps import closing_axis
+from pipeline.policies.scripted.primitives import Grip
+from pipeline.policies.scripted.scene import TABLE_MARGIN, Scene
+from pipeline.policies.scripted.skills import HAND_CLEARANCE, Ctx, Plan, travel
+
+LYING_COS = 0.5  # the object's own up axis within 60 deg of horizontal: lying
+BAR_OUT_M = 0.06  # a handle's outer bar stands at least this far off the body's axis
+BAR_THIN_M = 0.02  # ... and is thinner than this across the handle's plane
+FINGER_GAP_M = 0.014  # fingers opened this much wider than the bar
+RAMP_PER_STEP = 0.25  # the gripper's command ramp per control step (robosuite: 0.01 per sim step)
+OPEN_M = 0.08  # finger spread fully open
+PALM_M = 0.045  # the palm's underside above the grip site
+TILT = 0.52  # radians from straight down for a low handle (palm ~2 cm over body and table)
+
+
+@dataclass(frozen=True)
+class HandleGrasp:
+    pos: np.ndarray  # grip site (world)
+    yaw: float
+    opening: float  # finger spread to descend with
+    approach: np.ndarray | None = None  # the hand's pointing direction when tilted
+
+
+def _rot(quat: np.ndarray) -> np.ndarray:
+    w, x, y, z = quat
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+
+
+def lying_handle_grasp(scene: Scene, obj: str) -> HandleGrasp | None:
+    """The handle grasp of `obj` when it is a handled object lying on its side, else None."""
+    env = scene.env
+    pos, quat = env.object_pose(obj)
+    rot = _rot(quat)
+    axis = rot[:, 2]
+    if abs(axis[2]) > LYING_COS:
+        return None
+    m, d = env.env.sim.model._model, env.env.sim.data._data
+    bid = env.env.obj_body_id[obj]
+    geoms = [g for g in range(m.ngeom) if int(m.geom_bodyid[g]) == bid and (m.geom_contype[g] or m.geom_conaffinity[g])]
+    if not geoms:
+        return None
+    # each collision geom's box centre and half size in the object's frame
+    centres = np.array([rot.T @ (d.geom_xpos[g] + d.geom_xmat[g].reshape(3, 3) @ m.geom_aabb[g, :3] - pos)
+                        for g in geoms])
+    halves = np.array([np.abs(rot.T @ d.geom_xmat[g].reshape(3, 3)) @ m.geom_aabb[g, 3:] for g in geoms])
+    core = rot.T @ (env.object_com(obj) - pos)  # the body's axis passes (nearly) through the com
+    out = np.linalg.norm(centres[:, :2] - core[:2], axis=1)
+    bar = int(np.argmax(out))
+    if out[bar] < BAR_OUT_M:
+        return None
+    radial = (centres[bar, :2] - core[:2]) / out[bar]
+    across = np.array([-radial[1], radial[0]])  # across the handle's plane, in the object's xy
+    if 2 * float(np.abs(halves[bar, :2]) @ np.abs(across)) > BAR_THIN_M:
+        return None
+    h_world = rot @ np.array([*radial, 0.0])
+    if h_world[2] < -LYING_COS:
+        return None  # the handle is under the mug
+    c = np.cross(axis, [0.0, 0.0, 1.0])
+    c /= np.linalg.norm(c)
+    yaw = float(np.arctan2(-c[0], c[1]))
+    yaw = (yaw + np.pi / 2) % np.pi - np.pi / 2
+    bar_world = pos + rot @ centres[bar]
+    width = 2 * float(halves[bar] @ np.abs(rot.T @ closing_axis(yaw)))  # the bar across the fingers
+    grip = bar_world.copy()
+    grip[2] = max(grip[2], scene.table_height() + TABLE_MARGIN)
+    approach = None
+    if grip[2] + PALM_M < scene.box(obj).hi[2] + 0.01:
+        # a handle lying low at the side: the palm, square to the mug, would come down on
+        # the body; tilted about the mug's axis (fingertips in, wrist out) it clears both the
+        # body and the table
+        out = np.array([h_world[0], h_world[1], 0.0])
+        out /= max(np.linalg.norm(out), 1e-9)
+        approach = -np.sin(TILT) * out + np.array([0.0, 0.0, -np.cos(TILT)])
+    return HandleGrasp(pos=grip, yaw=yaw, opening=min(OPEN_M, width + FINGER_GAP_M), approach=approach)
+
+
+def grasp_by_handle(ctx: Ctx, obj: str, g: HandleGrasp, hover_m: float = 0.08) -> Plan:
+    """Hover over the bar, narrow the fingers to `g.opening`, descend, close, lift."""
+    s = ctx.scene
+    a = np.array([0.0, 0.0, -1.0]) if g.approach is None else g.approach
+    lift_z = s.path_clearance(s.eef(), g.pos, 0.06, {obj}) + HAND_CLEARANCE
+    hover = g.pos - a * hover_m  # back along the pointing direction: the descent follows it
+    yield from travel(ctx, hover, g.yaw, -1.0, lift_z)
+    yield ctx.move(hover, yaw=g.yaw, approach=g.approach, tol=0.012, rot_tol=None if g.approach is None else 0.15,
+                   max_steps=60, label="hover")
+    # the command ramps from open (-1) toward closed (+1); 0 then holds the spread
+    steps = int(round((1.0 - g.opening / OPEN_M) * 2 / RAMP_PER_STEP))
+    ctx.yaw_hold, ctx.approach_hold = g.yaw, g.approach
+    if steps > 0:
+        yield Grip(1.0, steps, label="narrow")
+    yield ctx.move(g.pos, gripper=0.0, speed=0.5, yaw=g.yaw, approach=g.approach, tol=0.007, max_steps=50,
+                   label="descend")
+    yield Grip(1.0, ctx.close_steps, label="close")
+    yield ctx.move(s.eef() + [0, 0, 0.1], gripper=1.0, speed=0.6, yaw=g.yaw, approach=g.approach, tol=0.02,
+                   label="pick_lift")
+    ctx.approach_hold = None  # carried with the hand turned down again
