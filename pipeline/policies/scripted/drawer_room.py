@@ -48,7 +48,7 @@ def finish_opening(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:
     env = ctx.scene.env
     joint = part_joint(env, conjunct[1])
     ctx.begin("open", conjunct, conjunct[1])
-    yield from _drag_out(ctx, joint)
+    yield from drag_out(ctx, joint)
     if ctx.truth is not None:
         done = env.object_state(conjunct[1]).is_open()
         ctx.end("achieved" if done else "half_open", f"{joint} at {env.joint_frame(joint)['qpos']:.3f}")
@@ -62,13 +62,13 @@ def make_room(ctx: Ctx, conjunct: tuple[str, ...], obj: str) -> Plan:
     elif cramped(ctx, conjunct[1], obj):
         ctx.begin("open", conjunct, conjunct[1])
         joint = part_joint(env, conjunct[1])
-        yield from _drag_out(ctx, joint)
+        yield from drag_out(ctx, joint)
         if ctx.truth is not None:
             ctx.end("achieved" if not cramped(ctx, conjunct[1], obj) else "half_open",
                     f"{joint} at {env.joint_frame(joint)['qpos']:.3f}")
 
 
-def _drag_out(ctx: Ctx, joint: str) -> Plan:
+def drag_out(ctx: Ctx, joint: str) -> Plan:
     s, env = ctx.scene, ctx.scene.env
     fr = env.joint_frame(joint)
     sign = open_sign(fr["range"])

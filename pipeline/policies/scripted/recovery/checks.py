@@ -176,6 +176,29 @@ def drawer_sweep(scene: Scene, joint: str) -> np.ndarray | None:
     return np.array([np.minimum(lo, lo + shift), np.maximum(hi, hi + shift)])
 
 
+def overhanging_drawer(scene: Scene, obj: str, pad: float = 0.02) -> str | None:
+    """The region of an open drawer that overhangs `obj` (a bowl left under the top drawer
+    it was to go into), when closing the drawer would uncover it; else None. The palm comes
+    down around the object, so `pad` widens its footprint. No grasp reaches under a drawer
+    whose floor is a hand's height over the object: the forearm comes down onto the drawer
+    (see `under_drawer`)."""
+    b = scene.box(obj)
+    ob = np.array([b.lo, b.hi])
+    for name in scene.env.env.object_sites_dict:
+        joints = scene.env.region(name)["joints"]
+        if not joints or scene.env.joint_frame(joints[0])["kind"] != "slide":
+            continue
+        fr = scene.env.joint_frame(joints[0])
+        rng = fr["range"]
+        closed_q = rng[0] if abs(rng[0]) < abs(rng[1]) else rng[1]
+        boxes = scene.env.joint_part_boxes(joints[0])
+        now = np.array([boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0)])
+        shut = now + fr["axis"] * (closed_q - fr["qpos"])
+        if now[0, 2] > b.hi[2] and _overlap(now, ob, pad) and not _overlap(shut, ob, pad):
+            return name
+    return None
+
+
 def proud_in_drawer(scene: Scene, joint: str, margin: float = 0.01) -> list[str]:
     """Objects standing in the drawer of a slide `joint` whose top rises above its walls (a
     bowl leaning on the front wall): closing the drawer jams them against the cabinet."""
@@ -198,9 +221,11 @@ def under_sweep(scene: Scene, obj: str, sweep: np.ndarray, margin: float = 0.05)
     return _overlap(np.array([b.lo, b.hi]), sweep, pad=margin) and b.hi[2] < sweep[1, 2]
 
 
-def free_spot(scene: Scene, obj: str, avoid: list[np.ndarray], forbid: list[np.ndarray] = ()) -> np.ndarray | None:
+def free_spot(scene: Scene, obj: str, avoid: list[np.ndarray], forbid: list[np.ndarray] = (),
+              far: float = 0.7) -> np.ndarray | None:
     """A table spot (xy) where `obj` can stand without touching anything, near the hand,
-    away from the points in `avoid` (goal targets), inside the comfortable region."""
+    away from the points in `avoid` (goal targets), inside the comfortable region (out to
+    `far` m in front of the robot base)."""
     box = scene.box(obj)
     r = float(np.linalg.norm(box.size[:2])) / 2 + 0.03
     table = scene.table_height()
@@ -209,7 +234,7 @@ def free_spot(scene: Scene, obj: str, avoid: list[np.ndarray], forbid: list[np.n
     boxes = [b for _, b in scene.obstacle_boxes({obj}) if b[1, 2] > table + 0.005]
     best = None
     home = base + HOME_XY
-    for x in np.arange(0.42, 0.7, 0.03):  # in front of the robot: far or close spots are slow
+    for x in np.arange(0.42, far, 0.03):  # in front of the robot: far or close spots are slow
         for y in np.arange(-0.3, 0.301, 0.03):
             xy = base + [x, y]
             sq = np.array([[*(xy - r), 0.0], [*(xy + r), 0.0]])

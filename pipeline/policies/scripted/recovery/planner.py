@@ -6,7 +6,8 @@ Each round reads the scene and decides one thing:
 2. the hand holds an object the next subgoal does not use -> put it aside;
 3. the arm touches something or sits low / awkward -> back it out;
 4. the next unmet subgoal (goal order: open, knobs, pick-and-place, close; an implied open
-   before putting into a closed drawer) has something in its way -> move that aside;
+   before putting into a closed drawer) has something in its way -> move that aside; an
+   open drawer overhangs the object to move -> push it in, set the object aside, pull it out;
 5. otherwise one attempt at the subgoal; attempt k of the same subgoal grasps differently.
 A subgoal that failed MAX_TRIES times, or a budget of steps spent, ends with a reason.
 `RECOVERY_DEBUG=1` in the environment prints each decision (for tuning; off by default).
@@ -29,6 +30,7 @@ from pipeline.policies.scripted.recovery.operate import operate_once
 from pipeline.policies.scripted.recovery.pick_place import pick_place_once
 from pipeline.policies.scripted.recovery.put_aside import put_aside
 from pipeline.policies.scripted.recovery.reasons import GiveUp, GiveUpReason
+from pipeline.policies.scripted.recovery.under_drawer import clear_from_under
 from pipeline.policies.scripted.recovery.variation import RetryNoise
 from pipeline.policies.scripted.skills import Ctx, Plan, destination
 from pipeline.policies.scripted.stack import carried
@@ -71,6 +73,7 @@ def recover(ctx: Ctx, now: Callable[[], int], budget: int | None) -> Plan:
     steps = articulated.close_lower_first(s.env, order_goal(goal, lambda region: articulated.openable(s.env, region)))
     tries: Counter = Counter()
     aside: Counter = Counter()
+    shut: Counter = Counter()  # drawers closed because they overhung a goal object
     keep = {n for c in goal for n in c[1:]}  # never moved aside: goal objects, targets and
     keep |= {s.env.region(n)["parent"] for n in list(keep) if s.env.is_region(n)}  # their owners
     while not s.env.goal_satisfied():
@@ -95,6 +98,12 @@ def recover(ctx: Ctx, now: Callable[[], int], budget: int | None) -> Plan:
         if held is None and not s.gripper_open():
             yield from let_go(ctx)
         yield from back_out(ctx)
+        if sub[0] in ("on", "in") and held != sub[1] and (over := checks.overhanging_drawer(s, sub[1])):
+            shut[over] += 1
+            if shut[over] <= MAX_ASIDE:  # (then the grasp is tried as it is)
+                _debug("clear from under the drawer", sub[1], over)
+                yield from clear_from_under(ctx, sub[1], over, shut[over] - 1)
+                continue
         if sub[0] in ("on", "in") and held != sub[1] and not insert.can_insert(s, sub):
             dest = destination(ctx, sub[1], sub[2])
             in_way = checks.blockers(s, sub[1], dest, keep)

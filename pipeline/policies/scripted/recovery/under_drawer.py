@@ -1,0 +1,90 @@
+"""Skill: get a goal object out from under an open drawer that overhangs it (a bowl left
+under the front of the top drawer it was to go into).
+
+No grasp reaches it there: the forearm comes down onto the drawer (measured, libero_goal
+"open the top drawer and put the bowl inside": the hand stopped 15 cm over the bowl on
+every rim side). Closing the drawer, putting the object aside and opening the drawer by its
+handle again works but costs ~450 steps. So: push the drawer in only as far as uncovers
+the object (and a hand's margin), put the object aside near by, out of the drawer's sweep,
+and open the drawer again. Each stage checks the live state; the planner replans after the
+skill.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from pipeline.policies.scripted.articulated import FINGER_HALF, handle_box, open_sign, part_joint
+from pipeline.policies.scripted.primitives import Grip
+from pipeline.policies.scripted.recovery import checks
+from pipeline.policies.scripted.recovery.operate import operate_once
+from pipeline.policies.scripted.recovery.put_aside import goal_points, put_aside
+from pipeline.policies.scripted.skills import Ctx, Plan, travel
+
+HAND_PAD_M = 0.03  # uncovered this far beyond the object's edge (more than `checks.overhanging_drawer` asks)
+
+
+def uncover_distance(ctx: Ctx, obj: str, joint: str) -> float:
+    """How far (m) the drawer must go in so that its parts no longer overhang `obj` (+pad)."""
+    s = ctx.scene
+    fr = s.env.joint_frame(joint)
+    pull = fr["axis"] * open_sign(fr["range"])
+    k = int(np.argmax(np.abs(pull[:2])))
+    d = float(np.sign(pull[k]))
+    boxes = s.env.joint_part_boxes(joint)
+    front = float(boxes[:, 1, k].max()) if d > 0 else float(-boxes[:, 0, k].min())
+    edge = float(s.box(obj).lo[k]) if d > 0 else float(-s.box(obj).hi[k])
+    return max(0.0, front - edge + HAND_PAD_M)
+
+
+def push_in(ctx: Ctx, joint: str, dist: float) -> Plan:
+    """A fist at the drawer's front pushes it in by `dist` (the fist closes on the way)."""
+    s, env = ctx.scene, ctx.scene.env
+    fr = env.joint_frame(joint)
+    pull = fr["axis"] * open_sign(fr["range"])
+    box, k, d = handle_box(env, joint, pull)
+    front = box[1, k] if d > 0 else box[0, k]
+    pos = (box[0] + box[1]) / 2
+    pos[k] = front + d * 0.035
+    yaw = np.pi / 2 if k == 1 else 0.0  # the palm's long side across the push
+    ctx.yaw_hold = yaw
+    hover = pos + [0, 0, 0.08]
+    yield from travel(ctx, hover, yaw, 1.0, s.path_clearance(s.eef(), hover, 0.06, set()) + 0.07)
+    yield ctx.move(pos, gripper=1.0, speed=0.6, yaw=yaw, tol=0.01, max_steps=40, label="face_drawer")
+    target = pos.copy()
+    target[k] = front + d * FINGER_HALF - d * dist
+    yield ctx.move(target, gripper=1.0, speed=0.6, yaw=yaw, tol=0.008, max_steps=40, label="push_in")
+    # back off and up, opening the hand on the way (the aside grasp needs it open), and turn
+    # it back to yaw 0: a grasp yaw half a turn from the fist's is a rotation by pi, whose axis
+    # is ill-defined, and the hand tumbles on the way (measured: it came down tilted)
+    ctx.yaw_hold = 0.0
+    yield ctx.move(s.eef() + pull / np.linalg.norm(pull) * 0.03 + [0, 0, 0.08], gripper=-1.0, yaw=0.0, tol=0.02,
+                   max_steps=20, label="retreat")
+    if not s.gripper_open():
+        yield Grip(-1.0, 4, label="open")  # (else the next grasp opens it again, 12 steps)
+
+
+def clear_from_under(ctx: Ctx, obj: str, region: str, attempt: int = 0) -> Plan:
+    s, env = ctx.scene, ctx.scene.env
+    joint = part_joint(env, region)
+    fr = env.joint_frame(joint)
+    sign = open_sign(fr["range"])
+    out = sign * fr["qpos"]  # how far out it is now
+    dist = min(uncover_distance(ctx, obj, joint), out)
+    ctx.begin("close", ("close", region), region)
+    yield from push_in(ctx, joint, dist)
+    if ctx.truth is not None:
+        ctx.end("achieved" if checks.overhanging_drawer(s, obj) is None else "half_open",
+                f"{joint} at {env.joint_frame(joint)['qpos']:.3f}")
+    if checks.overhanging_drawer(s, obj) is not None:
+        return
+    sweep = checks.drawer_sweep(s, joint)
+    # near where it is (it goes into the drawer next, and the step budget is tight): its own
+    # place does not repel it, and the spot may lie as far out as it lies now
+    here = s.env.object_pose(obj)[0]
+    away = [p for p in goal_points(ctx) if float(np.linalg.norm(p[:2] - here[:2])) > 1e-6]
+    far = max(0.7, float(here[0] - checks.robot_base(s)[0]) + 0.03)
+    yield from put_aside(ctx, obj, attempt, forbid=[sweep], avoid=away, far=far)
+    if sweep is not None and checks.under_sweep(s, obj, sweep):
+        return  # still in the way: the planner decides again
+    yield from operate_once(ctx, ("open", region))  # by its handle, or dragged when far out
