@@ -139,3 +139,29 @@ def test_the_white_cabinets_low_bottom_drawer_is_pushed_shut():
         start(env)
         result, policy = finish(env, task, horizon=150)
         assert result.success
+
+
+def test_a_mug_lying_on_its_side_is_grasped_by_its_handle_and_placed():
+    task = tasks(["libero_10"])[4]  # the white mug on the left plate, the yellow-white mug on the right one
+    with build_env(task) as env:
+        start(env)
+        p, q = env.object_pose("porcelain_mug_1")
+        # turned 90 deg about its own handle axis: on its side, the handle lying flat beside it
+        set_pose(env, "porcelain_mug_1", p + [0.05, 0, 0.06], quat_mul(q, lying("x")), settle=30)
+        assert checks_lying(env, "porcelain_mug_1")
+        result, policy = finish(env, task, horizon=520)
+        assert result.success, policy.give_up_detail
+
+
+def quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Hamilton product of (w, x, y, z) quaternions."""
+    w1, x1, y1, z1 = a
+    w2, x2, y2, z2 = b
+    return np.array([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2, w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+                     w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2])
+
+
+def checks_lying(env, obj: str) -> bool:
+    from pipeline.policies.scripted.recovery.lying_cup import lying_handle_grasp
+
+    return lying_handle_grasp(Scene(env), obj) is not None

@@ -15,13 +15,17 @@ from __future__ import annotations
 import numpy as np
 
 from pipeline.policies.scripted.articulated import FINGER_HALF, handle_box, open_sign, part_joint
+from pipeline.policies.scripted.drawer_room import drag_out
 from pipeline.policies.scripted.primitives import Grip
 from pipeline.policies.scripted.recovery import checks
 from pipeline.policies.scripted.recovery.operate import operate_once
 from pipeline.policies.scripted.recovery.put_aside import goal_points, put_aside
 from pipeline.policies.scripted.skills import Ctx, Plan, travel
 
-HAND_PAD_M = 0.03  # uncovered this far beyond the object's edge (more than `checks.overhanging_drawer` asks)
+HAND_PAD_M = 0.03  # pushed this far past the object's edge (less: the forearm still meets the drawer)
+# a drawer out at least this far is dragged out again by a fist behind its front wall (the
+# handle pull costs ~180 steps: tilt, reach, pull, untilt); shorter, by its handle
+FIST_ROOM_M = 0.06
 
 
 def uncover_distance(ctx: Ctx, obj: str, joint: str) -> float:
@@ -54,11 +58,8 @@ def push_in(ctx: Ctx, joint: str, dist: float) -> Plan:
     target = pos.copy()
     target[k] = front + d * FINGER_HALF - d * dist
     yield ctx.move(target, gripper=1.0, speed=0.6, yaw=yaw, tol=0.008, max_steps=40, label="push_in")
-    # back off and up, opening the hand on the way (the aside grasp needs it open), and turn
-    # it back to yaw 0: a grasp yaw half a turn from the fist's is a rotation by pi, whose axis
-    # is ill-defined, and the hand tumbles on the way (measured: it came down tilted)
-    ctx.yaw_hold = 0.0
-    yield ctx.move(s.eef() + pull / np.linalg.norm(pull) * 0.03 + [0, 0, 0.08], gripper=-1.0, yaw=0.0, tol=0.02,
+    # back off and up, opening the hand on the way (the aside grasp needs it open)
+    yield ctx.move(s.eef() + pull / np.linalg.norm(pull) * 0.03 + [0, 0, 0.08], gripper=-1.0, yaw=yaw, tol=0.02,
                    max_steps=20, label="retreat")
     if not s.gripper_open():
         yield Grip(-1.0, 4, label="open")  # (else the next grasp opens it again, 12 steps)
@@ -74,9 +75,9 @@ def clear_from_under(ctx: Ctx, obj: str, region: str, attempt: int = 0) -> Plan:
     ctx.begin("close", ("close", region), region)
     yield from push_in(ctx, joint, dist)
     if ctx.truth is not None:
-        ctx.end("achieved" if checks.overhanging_drawer(s, obj) is None else "half_open",
+        ctx.end("achieved" if checks.overhanging_drawer(s, obj, pad=0.0) is None else "half_open",
                 f"{joint} at {env.joint_frame(joint)['qpos']:.3f}")
-    if checks.overhanging_drawer(s, obj) is not None:
+    if checks.overhanging_drawer(s, obj, pad=0.0) is not None:
         return
     sweep = checks.drawer_sweep(s, joint)
     # near where it is (it goes into the drawer next, and the step budget is tight): its own
@@ -87,4 +88,11 @@ def clear_from_under(ctx: Ctx, obj: str, region: str, attempt: int = 0) -> Plan:
     yield from put_aside(ctx, obj, attempt, forbid=[sweep], avoid=away, far=far)
     if sweep is not None and checks.under_sweep(s, obj, sweep):
         return  # still in the way: the planner decides again
-    yield from operate_once(ctx, ("open", region))  # by its handle, or dragged when far out
+    if sign * env.joint_frame(joint)["qpos"] < FIST_ROOM_M:
+        yield from operate_once(ctx, ("open", region))
+        return
+    ctx.begin("open", ("open", region), region)
+    yield from drag_out(ctx, joint)
+    if ctx.truth is not None:
+        ctx.end("achieved" if env.object_state(region).is_open() else "half_open",
+                f"{joint} at {env.joint_frame(joint)['qpos']:.3f}")
