@@ -221,11 +221,9 @@ def under_sweep(scene: Scene, obj: str, sweep: np.ndarray, margin: float = 0.05)
     return _overlap(np.array([b.lo, b.hi]), sweep, pad=margin) and b.hi[2] < sweep[1, 2]
 
 
-def free_spot(scene: Scene, obj: str, avoid: list[np.ndarray], forbid: list[np.ndarray] = (),
-              far: float = 0.7) -> np.ndarray | None:
+def free_spot(scene: Scene, obj: str, avoid: list[np.ndarray], forbid: list[np.ndarray] = ()) -> np.ndarray | None:
     """A table spot (xy) where `obj` can stand without touching anything, near the hand,
-    away from the points in `avoid` (goal targets), inside the comfortable region (out to
-    `far` m in front of the robot base)."""
+    away from the points in `avoid` (goal targets), inside the comfortable region."""
     box = scene.box(obj)
     r = float(np.linalg.norm(box.size[:2])) / 2 + 0.03
     table = scene.table_height()
@@ -234,7 +232,7 @@ def free_spot(scene: Scene, obj: str, avoid: list[np.ndarray], forbid: list[np.n
     boxes = [b for _, b in scene.obstacle_boxes({obj}) if b[1, 2] > table + 0.005]
     best = None
     home = base + HOME_XY
-    for x in np.arange(0.42, far, 0.03):  # in front of the robot: far or close spots are slow
+    for x in np.arange(0.42, 0.7, 0.03):  # in front of the robot: far or close spots are slow
         for y in np.arange(-0.3, 0.301, 0.03):
             xy = base + [x, y]
             sq = np.array([[*(xy - r), 0.0], [*(xy + r), 0.0]])

@@ -97,13 +97,15 @@ def recover(ctx: Ctx, now: Callable[[], int], budget: int | None) -> Plan:
             continue
         if held is None and not s.gripper_open():
             yield from let_go(ctx)
+        over = checks.overhanging_drawer(s, sub[1]) if sub[0] in ("on", "in") and held != sub[1] else None
+        if over is not None and shut[over] >= MAX_ASIDE:
+            over = None  # (then the grasp is tried as it is)
         yield from back_out(ctx)
-        if sub[0] in ("on", "in") and held != sub[1] and (over := checks.overhanging_drawer(s, sub[1])):
+        if over is not None:
             shut[over] += 1
-            if shut[over] <= MAX_ASIDE:  # (then the grasp is tried as it is)
-                _debug("clear from under the drawer", sub[1], over)
-                yield from clear_from_under(ctx, sub[1], over, shut[over] - 1)
-                continue
+            _debug("clear from under the drawer", sub[1], over)
+            yield from clear_from_under(ctx, sub[1], over, shut[over] - 1)
+            continue
         if sub[0] in ("on", "in") and held != sub[1] and not insert.can_insert(s, sub):
             dest = destination(ctx, sub[1], sub[2])
             in_way = checks.blockers(s, sub[1], dest, keep)

@@ -16,13 +16,14 @@ import numpy as np
 
 from pipeline.policies.scripted.articulated import FINGER_HALF, handle_box, open_sign, part_joint
 from pipeline.policies.scripted.drawer_room import drag_out
+from pipeline.policies.scripted.grasps import plan_grasp
 from pipeline.policies.scripted.primitives import Grip
 from pipeline.policies.scripted.recovery import checks
 from pipeline.policies.scripted.recovery.operate import operate_once
 from pipeline.policies.scripted.recovery.put_aside import goal_points, put_aside
 from pipeline.policies.scripted.skills import Ctx, Plan, travel
 
-HAND_PAD_M = 0.03  # pushed this far past the object's edge (less: the forearm still meets the drawer)
+HAND_PAD_M = 0.01  # pushed this far past the object's edge
 # a drawer out at least this far is dragged out again by a fist behind its front wall (the
 # handle pull costs ~180 steps: tilt, reach, pull, untilt); shorter, by its handle
 FIST_ROOM_M = 0.06
@@ -39,6 +40,20 @@ def uncover_distance(ctx: Ctx, obj: str, joint: str) -> float:
     front = float(boxes[:, 1, k].max()) if d > 0 else float(-boxes[:, 0, k].min())
     edge = float(s.box(obj).lo[k]) if d > 0 else float(-s.box(obj).hi[k])
     return max(0.0, front - edge + HAND_PAD_M)
+
+
+def away_from_drawer(s, obj: str, joint: str, attempt: int, candidates: int = 6) -> int:
+    """Which grasp candidate (`plan_grasp`'s choice) to take: of the first few, the one whose
+    grip site lies farthest from the drawer's front (the wrist and forearm come down over
+    it, and a drawer just pushed in still sticks out close by); `attempt` takes the next."""
+    fr = s.env.joint_frame(joint)
+    pull = fr["axis"] * open_sign(fr["range"])
+    k = int(np.argmax(np.abs(pull[:2])))
+    d = float(np.sign(pull[k]))
+    boxes = s.env.joint_part_boxes(joint)
+    front = float(boxes[:, 1, k].max()) if d > 0 else float(boxes[:, 0, k].min())
+    ranked = sorted(range(candidates), key=lambda c: -d * (plan_grasp(s, obj, None, c).pos[k] - front))
+    return ranked[attempt % candidates]
 
 
 def push_in(ctx: Ctx, joint: str, dist: float) -> Plan:
@@ -62,7 +77,7 @@ def push_in(ctx: Ctx, joint: str, dist: float) -> Plan:
     yield ctx.move(s.eef() + pull / np.linalg.norm(pull) * 0.03 + [0, 0, 0.08], gripper=-1.0, yaw=yaw, tol=0.02,
                    max_steps=20, label="retreat")
     if not s.gripper_open():
-        yield Grip(-1.0, 4, label="open")  # (else the next grasp opens it again, 12 steps)
+        yield Grip(-1.0, 8, label="open")  # (else the next grasp opens it again, 12 steps)
 
 
 def clear_from_under(ctx: Ctx, obj: str, region: str, attempt: int = 0) -> Plan:
@@ -80,18 +95,19 @@ def clear_from_under(ctx: Ctx, obj: str, region: str, attempt: int = 0) -> Plan:
     if checks.overhanging_drawer(s, obj, pad=0.0) is not None:
         return
     sweep = checks.drawer_sweep(s, joint)
-    # near where it is (it goes into the drawer next, and the step budget is tight): its own
-    # place does not repel it, and the spot may lie as far out as it lies now
+    # near where it is (it goes into the drawer next): its own place does not repel it. (Not
+    # farther out than `free_spot` looks: measured, lowering it 0.74 m out took 60 steps.)
     here = s.env.object_pose(obj)[0]
     away = [p for p in goal_points(ctx) if float(np.linalg.norm(p[:2] - here[:2])) > 1e-6]
-    far = max(0.7, float(here[0] - checks.robot_base(s)[0]) + 0.03)
-    yield from put_aside(ctx, obj, attempt, forbid=[sweep], avoid=away, far=far)
+    yield from put_aside(ctx, obj, away_from_drawer(s, obj, joint, attempt), forbid=[sweep], avoid=away)
     if sweep is not None and checks.under_sweep(s, obj, sweep):
         return  # still in the way: the planner decides again
     if sign * env.joint_frame(joint)["qpos"] < FIST_ROOM_M:
         yield from operate_once(ctx, ("open", region))
         return
     ctx.begin("open", ("open", region), region)
+    # close the fist while rising off the set-aside object (drag_out closes it standing still)
+    yield ctx.move(s.eef() + [0, 0, 0.06], gripper=1.0, yaw=ctx.yaw_hold, tol=0.02, max_steps=12, label="fist")
     yield from drag_out(ctx, joint)
     if ctx.truth is not None:
         ctx.end("achieved" if env.object_state(region).is_open() else "half_open",
