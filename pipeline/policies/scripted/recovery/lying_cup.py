@@ -5,8 +5,9 @@ mouth is covered from above by its own wall: no top-down rim or whole grasp hold
 (measured, libero_10 LIVING_ROOM_SCENE5: the fingers closed on nothing 4 times out of 4).
 Its handle's outer bar is thin and stands off the body: the fingers close across the bar,
 horizontally and square to the mug's axis, opened only a little wider than the bar so the
-inner finger fits into the handle's hole when the handle lies flat. The mug then hangs
-from its handle (still lying) and is set down on its side where its body origin goes.
+inner finger fits into the handle's hole when the handle lies flat. It is carried and set
+down on its side (where its body origin goes) with the hand kept as it grasped, and the
+fingers withdraw the way they came in.
 Objects are upright in their own frame (LIBERO's convention: local z up).
 """
 
@@ -19,7 +20,8 @@ import numpy as np
 from pipeline.policies.scripted.grasps import closing_axis
 from pipeline.policies.scripted.primitives import Grip
 from pipeline.policies.scripted.scene import TABLE_MARGIN, Scene
-from pipeline.policies.scripted.skills import HAND_CLEARANCE, Ctx, Plan, travel
+from pipeline.policies.scripted.skills import (CARRY_CLEARANCE, HAND_CLEARANCE, Ctx, Plan, place_xy,
+                                               support_ceiling, travel)
 
 LYING_COS = 0.5  # the object's own up axis within 60 deg of horizontal: lying
 BAR_OUT_M = 0.06  # a handle's outer bar stands at least this far off the body's axis
@@ -46,14 +48,12 @@ def _rot(quat: np.ndarray) -> np.ndarray:
                      [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
 
 
-def lying_handle_grasp(scene: Scene, obj: str) -> HandleGrasp | None:
-    """The handle grasp of `obj` when it is a handled object lying on its side, else None."""
+def _handle_bar(scene: Scene, obj: str):
+    """(object rotation, bar centre in the object's frame, unit direction from the body's
+    axis to the bar in the object's xy, bar half sizes in the object's frame), or None."""
     env = scene.env
     pos, quat = env.object_pose(obj)
     rot = _rot(quat)
-    axis = rot[:, 2]
-    if abs(axis[2]) > LYING_COS:
-        return None
     m, d = env.env.sim.model._model, env.env.sim.data._data
     bid = env.env.obj_body_id[obj]
     geoms = [g for g in range(m.ngeom) if int(m.geom_bodyid[g]) == bid and (m.geom_contype[g] or m.geom_conaffinity[g])]
@@ -72,6 +72,19 @@ def lying_handle_grasp(scene: Scene, obj: str) -> HandleGrasp | None:
     across = np.array([-radial[1], radial[0]])  # across the handle's plane, in the object's xy
     if 2 * float(np.abs(halves[bar, :2]) @ np.abs(across)) > BAR_THIN_M:
         return None
+    return rot, centres[bar], radial, halves[bar]
+
+
+def lying_handle_grasp(scene: Scene, obj: str) -> HandleGrasp | None:
+    """The handle grasp of `obj` when it is a handled object lying on its side, else None."""
+    pos, quat = scene.env.object_pose(obj)
+    axis = _rot(quat)[:, 2]
+    if abs(axis[2]) > LYING_COS:
+        return None
+    found = _handle_bar(scene, obj)
+    if found is None:
+        return None
+    rot, centre, radial, half = found
     h_world = rot @ np.array([*radial, 0.0])
     if h_world[2] < -LYING_COS:
         return None  # the handle is under the mug
@@ -79,8 +92,8 @@ def lying_handle_grasp(scene: Scene, obj: str) -> HandleGrasp | None:
     c /= np.linalg.norm(c)
     yaw = float(np.arctan2(-c[0], c[1]))
     yaw = (yaw + np.pi / 2) % np.pi - np.pi / 2
-    bar_world = pos + rot @ centres[bar]
-    width = 2 * float(halves[bar] @ np.abs(rot.T @ closing_axis(yaw)))  # the bar across the fingers
+    bar_world = pos + rot @ centre
+    width = 2 * float(half @ np.abs(rot.T @ closing_axis(yaw)))  # the bar across the fingers
     grip = bar_world.copy()
     grip[2] = max(grip[2], scene.table_height() + TABLE_MARGIN)
     approach = None
@@ -112,5 +125,35 @@ def grasp_by_handle(ctx: Ctx, obj: str, g: HandleGrasp, hover_m: float = 0.08) -
                    label="descend")
     yield Grip(1.0, ctx.close_steps, label="close")
     yield ctx.move(s.eef() + [0, 0, 0.1], gripper=1.0, speed=0.6, yaw=g.yaw, approach=g.approach, tol=0.02,
-                   label="pick_lift")
-    ctx.approach_hold = None  # carried with the hand turned down again
+                   label="pick_lift")  # (carried with the hand as it is: see place_by_handle)
+
+
+
+def place_by_handle(ctx: Ctx, obj: str, target: str) -> Plan:
+    """Set a mug held by its handle down on `target` with the hand as it grasped (tilted or
+    not), let go, and withdraw the way the fingers came in: the inner finger is threaded
+    through the handle, and a straight retreat of a turned hand lifts the mug again
+    (measured: it hung from one finger)."""
+    s = ctx.scene
+    a = ctx.approach_hold
+    down = np.array([0.0, 0.0, -1.0]) if a is None else a
+    body = s.env.object_pose(obj)[0]
+    box = s.box(obj)
+    eef = s.eef()
+    hold = eef - body
+    bottom = eef[2] - box.lo[2]
+    radius = 0.6 * float(min(box.size[0], box.size[1])) / 2
+    dest = place_xy(ctx, obj, target)
+    foot = dest + (box.centre[:2] - body[:2])
+    release_z = s.support_top(foot, radius, {obj}, below=support_ceiling(s.env, target)) + 0.015 + bottom
+    carry_z = max(s.path_clearance(box.centre, foot, radius, {obj}) + CARRY_CLEARANCE + bottom, release_z + 0.05)
+    goal = np.array([dest[0] + hold[0], dest[1] + hold[1], release_z])
+    yaw = ctx.yaw_hold
+    if eef[2] < carry_z - 0.015:
+        yield ctx.move([eef[0], eef[1], carry_z], gripper=1.0, yaw=yaw, approach=a, tol=0.02, label="lift")
+    yield ctx.move([goal[0], goal[1], carry_z], gripper=1.0, yaw=yaw, approach=a, tol=0.015, label="transport")
+    yield ctx.move(goal, gripper=1.0, speed=0.5, yaw=yaw, approach=a, tol=0.01, max_steps=60, label="lower")
+    yield Grip(-1.0, ctx.open_steps, label="open")
+    yield ctx.move(s.eef() - down * 0.07, gripper=-1.0, yaw=yaw, approach=a, tol=0.015, max_steps=25, label="withdraw")
+    ctx.approach_hold = None
+    yield ctx.move(s.eef() + [0, 0, 0.05], gripper=-1.0, yaw=yaw, tol=0.02, max_steps=20, label="retreat")

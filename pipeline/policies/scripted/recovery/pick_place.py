@@ -8,7 +8,7 @@ retry shift of `variation.RetryNoise`. The planner calls it again from the live 
 from __future__ import annotations
 
 from pipeline.policies.scripted.recovery import checks
-from pipeline.policies.scripted.recovery.lying_cup import grasp_by_handle, lying_handle_grasp
+from pipeline.policies.scripted.recovery.lying_cup import grasp_by_handle, lying_handle_grasp, place_by_handle
 from pipeline.policies.scripted.stack import carried
 from pipeline.policies.scripted.skills import Ctx, Plan, destination, free_hand, grasp, place
 
@@ -17,10 +17,12 @@ def pick_place_once(ctx: Ctx, conjunct: tuple[str, ...], attempt: int) -> Plan:
     _, obj, target = conjunct
     s = ctx.scene
     ctx.begin("pick_place", conjunct, obj, target)
+    by_handle = False
     if not carried(s, obj, checks.held(s)):
         yield from free_hand(ctx)
         handle = lying_handle_grasp(s, obj)  # a mug on its side: by its handle
-        if handle is not None:
+        by_handle = handle is not None
+        if by_handle:
             yield from grasp_by_handle(ctx, obj, handle, hover_m=0.08 + 0.03 * min(attempt, 2))
         else:
             yield from grasp(ctx, obj, destination(ctx, obj, target), choice=attempt,
@@ -30,7 +32,10 @@ def pick_place_once(ctx: Ctx, conjunct: tuple[str, ...], attempt: int) -> Plan:
             if ctx.truth is not None:
                 ctx.truth.end_hand(obj, False)
             return
-    yield from place(ctx, obj, target)
+    if by_handle:
+        yield from place_by_handle(ctx, obj, target)
+    else:
+        yield from place(ctx, obj, target)
     if ctx.truth is not None:
         ctx.truth.end_hand(obj, s.satisfied(conjunct))
     if not s.satisfied(conjunct) and not carried(s, obj, checks.held(s)):
