@@ -26,6 +26,7 @@ from pipeline.policies.scripted.skills import (CARRY_CLEARANCE, HAND_CLEARANCE, 
 LYING_COS = 0.5  # the object's own up axis within 60 deg of horizontal: lying
 BAR_OUT_M = 0.06  # a handle's outer bar stands at least this far off the body's axis
 BAR_THIN_M = 0.02  # ... and is thinner than this across the handle's plane
+CUP_TALL_M = 0.07  # a handled cup is at least this tall in its own frame
 FINGER_GAP_M = 0.014  # fingers opened this much wider than the bar
 RAMP_PER_STEP = 0.25  # the gripper's command ramp per control step (robosuite: 0.01 per sim step)
 OPEN_M = 0.08  # finger spread fully open
@@ -63,10 +64,17 @@ def _handle_bar(scene: Scene, obj: str):
     centres = np.array([rot.T @ (d.geom_xpos[g] + d.geom_xmat[g].reshape(3, 3) @ m.geom_aabb[g, :3] - pos)
                         for g in geoms])
     halves = np.array([np.abs(rot.T @ d.geom_xmat[g].reshape(3, 3)) @ m.geom_aabb[g, 3:] for g in geoms])
+    # a cup stands tall in its own frame, its handle on its side (not at an end: a bottle
+    # lying along its own x or y, as the ketchup does, has its cap far out)
+    lo, hi = float((centres[:, 2] - halves[:, 2]).min()), float((centres[:, 2] + halves[:, 2]).max())
+    if hi - lo < CUP_TALL_M:
+        return None
     core = rot.T @ (env.object_com(obj) - pos)  # the body's axis passes (nearly) through the com
     out = np.linalg.norm(centres[:, :2] - core[:2], axis=1)
     bar = int(np.argmax(out))
     if out[bar] < BAR_OUT_M:
+        return None
+    if not lo + 0.15 * (hi - lo) < centres[bar, 2] < hi - 0.15 * (hi - lo):
         return None
     radial = (centres[bar, :2] - core[:2]) / out[bar]
     across = np.array([-radial[1], radial[0]])  # across the handle's plane, in the object's xy
