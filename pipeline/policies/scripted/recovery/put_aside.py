@@ -23,17 +23,15 @@ def goal_points(ctx: Ctx) -> list[np.ndarray]:
     return pts
 
 
-def put_aside(ctx: Ctx, obj: str, attempt: int = 0, forbid: list[np.ndarray] = (),
-              avoid: list[np.ndarray] | None = None) -> Plan:
-    """`forbid`: (2, 3) boxes the spot must keep clear of (e.g. a drawer's sweep); `avoid`:
-    points the spot keeps away from (default: the goal's objects and targets)."""
+def put_aside(ctx: Ctx, obj: str, attempt: int = 0, forbid: list[np.ndarray] = ()) -> Plan:
+    """`forbid`: (2, 3) boxes the spot must keep clear of (e.g. a drawer's sweep)."""
     s = ctx.scene
     if checks.held(s) != obj:
         yield from free_hand(ctx)
         yield from grasp(ctx, obj, None, choice=attempt, hover_m=0.08 + 0.03 * min(attempt, 2))
         if checks.held(s) != obj:
             return
-    spot = checks.free_spot(s, obj, goal_points(ctx) if avoid is None else avoid, forbid)
+    spot = checks.free_spot(s, obj, goal_points(ctx), forbid)
     if spot is None:
         raise GiveUp(GiveUpReason.NO_PLAN, f"no free spot on the table to put {obj} aside")
     yield from place_at(ctx, obj, spot)

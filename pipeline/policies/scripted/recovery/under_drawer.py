@@ -20,8 +20,9 @@ from pipeline.policies.scripted.grasps import plan_grasp
 from pipeline.policies.scripted.primitives import Grip
 from pipeline.policies.scripted.recovery import checks
 from pipeline.policies.scripted.recovery.operate import operate_once
-from pipeline.policies.scripted.recovery.put_aside import goal_points, put_aside
-from pipeline.policies.scripted.skills import Ctx, Plan, travel
+from pipeline.policies.scripted.recovery.put_aside import goal_points
+from pipeline.policies.scripted.recovery.reasons import GiveUp, GiveUpReason
+from pipeline.policies.scripted.skills import Ctx, Plan, free_hand, grasp, place_at, travel
 
 HAND_PAD_M = 0.01  # pushed this far past the object's edge
 # a drawer out at least this far is dragged out again by a fist behind its front wall (the
@@ -95,11 +96,20 @@ def clear_from_under(ctx: Ctx, obj: str, region: str, attempt: int = 0) -> Plan:
     if checks.overhanging_drawer(s, obj, pad=0.0) is not None:
         return
     sweep = checks.drawer_sweep(s, joint)
-    # near where it is (it goes into the drawer next): its own place does not repel it. (Not
-    # farther out than `free_spot` looks: measured, lowering it 0.74 m out took 60 steps.)
+    # aside: grasped from the side away from the drawer, put down near where it is (it goes
+    # into the drawer next: its own place does not repel the spot; not farther out than
+    # `free_spot` looks: measured, lowering it 0.74 m out took 60 steps)
+    yield from free_hand(ctx)
+    yield from grasp(ctx, obj, None, choice=away_from_drawer(s, obj, joint, attempt),
+                     hover_m=0.08 + 0.03 * min(attempt, 2))
+    if checks.held(s) != obj:
+        return
     here = s.env.object_pose(obj)[0]
     away = [p for p in goal_points(ctx) if float(np.linalg.norm(p[:2] - here[:2])) > 1e-6]
-    yield from put_aside(ctx, obj, away_from_drawer(s, obj, joint, attempt), forbid=[sweep], avoid=away)
+    spot = checks.free_spot(s, obj, away, [sweep])
+    if spot is None:
+        raise GiveUp(GiveUpReason.NO_PLAN, f"no free spot on the table to put {obj} aside")
+    yield from place_at(ctx, obj, spot)
     if sweep is not None and checks.under_sweep(s, obj, sweep):
         return  # still in the way: the planner decides again
     if sign * env.joint_frame(joint)["qpos"] < FIST_ROOM_M:
@@ -109,6 +119,7 @@ def clear_from_under(ctx: Ctx, obj: str, region: str, attempt: int = 0) -> Plan:
     # close the fist while rising off the set-aside object (drag_out closes it standing still)
     yield ctx.move(s.eef() + [0, 0, 0.06], gripper=1.0, yaw=ctx.yaw_hold, tol=0.02, max_steps=12, label="fist")
     yield from drag_out(ctx, joint)
+    yield Grip(-1.0, 10, label="unfist")  # (the next grasp's free_hand: 12 steps and a rise)
     if ctx.truth is not None:
         ctx.end("achieved" if env.object_state(region).is_open() else "half_open",
                 f"{joint} at {env.joint_frame(joint)['qpos']:.3f}")
