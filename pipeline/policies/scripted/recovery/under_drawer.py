@@ -119,7 +119,6 @@ def clear_from_under(ctx: Ctx, obj: str, region: str, attempt: int = 0) -> Plan:
     # close the fist while rising off the set-aside object (drag_out closes it standing still)
     yield ctx.move(s.eef() + [0, 0, 0.06], gripper=1.0, yaw=ctx.yaw_hold, tol=0.02, max_steps=12, label="fist")
     yield from drag_out(ctx, joint)
-    yield Grip(-1.0, 10, label="unfist")  # (the next grasp's free_hand: 12 steps and a rise)
     if ctx.truth is not None:
         ctx.end("achieved" if env.object_state(region).is_open() else "half_open",
                 f"{joint} at {env.joint_frame(joint)['qpos']:.3f}")
