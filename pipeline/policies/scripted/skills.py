@@ -78,9 +78,13 @@ def free_hand(ctx: Ctx) -> Plan:
         yield ctx.move(eef + [0, 0, 0.06], tol=0.02, label="back_off")
 
 
-def grasp(ctx: Ctx, obj: str, dest: np.ndarray | None = None, choice: int = 0, hover_m: float = 0.08) -> Plan:
+def grasp(ctx: Ctx, obj: str, dest: np.ndarray | None = None, choice: int = 0, hover_m: float = 0.08,
+          turn_tol: float | None = None) -> Plan:
     """Reach above the object, descend, close, lift. `choice` / `hover_m`: another grasp
-    candidate and a higher hover (the recovery expert's retries)."""
+    candidate and a higher hover (the recovery expert's retries). `turn_tol` (radians): the
+    hover also waits until the hand has turned to the grasp's yaw, so a hand still turning
+    does not sweep its fingers into the object on the way down (the recovery expert; a
+    plain expert's start leaves little to turn)."""
     s = ctx.scene
     g = plan_grasp(s, obj, dest, choice)
     offset = ctx.noise.grasp_offset()
@@ -89,7 +93,7 @@ def grasp(ctx: Ctx, obj: str, dest: np.ndarray | None = None, choice: int = 0, h
     lift_z = s.path_clearance(s.eef(), pos, 0.06, {obj}) + HAND_CLEARANCE
     hover = pos + [0, 0, hover_m]
     yield from travel(ctx, hover, g.yaw, -1.0, lift_z)
-    yield ctx.move(hover, yaw=g.yaw, tol=0.012, label="hover")
+    yield ctx.move(hover, yaw=g.yaw, tol=0.012, label="hover", rot_tol=turn_tol)
     t = ctx.noise.timing()
     ctx.note(grasp_timing=t)
     early = {"switch_gripper": 1.0, "switch_dist": 0.005 * -t} if t < 0 else {}
