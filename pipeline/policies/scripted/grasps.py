@@ -26,6 +26,7 @@ LONG_M = 0.12  # horizontal length beyond which a whole-object grasp goes to the
 TALL_M = 0.11  # objects taller than this may be carried by a handle
 HANDLE_THIN_M, HANDLE_OUT_M = 0.016, 0.055  # a handle part: thinner than this, this far out
 UPRIGHT_COS = np.cos(np.radians(20))  # body axis this close to vertical: standing upright
+YAW_BAND = np.radians(20)
 YAWS = np.linspace(-np.pi / 2, np.pi / 2, 12, endpoint=False)
 # a standing book: thinner than SLAB_THIN_M, taller than SLAB_TALL_M, long. It is held near
 # its top edge so the fingers stay above a compartment's walls when it goes in (slot.py)
@@ -106,9 +107,12 @@ def handle_grasp(scene: Scene, obj: str) -> Grasp | None:
     lo, hi = parts[:, 0].min(axis=0), parts[:, 1].max(axis=0)
     thin_axis = int(np.argmin((hi - lo)[:2]))  # fingers close along it
     d = rot[:, thin_axis]  # ... in world
-    # closing_axis(yaw) = (-sin, cos): yaw in (-pi/2, pi/2] (an unturned pot: 0 or pi/2)
+    # closing_axis(yaw) = (-sin, cos), the same for yaw + pi: yaw in (-pi/2, pi/2] as for an
+    # unturned pot (0 or pi/2), widened by YAW_BAND so a pot turned a few degrees the other
+    # way is not grasped with the hand turned half round
     yaw = float(np.arctan2(-d[0], d[1]))
-    yaw = yaw - np.pi if yaw > np.pi / 2 + 1e-6 else yaw + np.pi if yaw <= -np.pi / 2 + 1e-6 else yaw
+    lo_yaw = -np.pi / 2 + YAW_BAND
+    yaw = yaw - np.pi if yaw > lo_yaw + np.pi else yaw + np.pi if yaw <= lo_yaw else yaw
     pos = body + rot @ ((lo + hi) / 2)
     return Grasp(pos=pos, yaw=yaw, rim=False)
 

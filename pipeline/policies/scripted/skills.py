@@ -28,6 +28,8 @@ Plan = Iterator[Primitive]
 HAND_CLEARANCE = 0.07  # grip site above obstacles when the hand moves empty
 CARRY_CLEARANCE = 0.04  # held object's bottom above obstacles in transit
 MAX_Z = 1.35  # keep targets inside the arm's comfortable workspace
+STAND_MIN_TILT, STAND_MAX_TILT = 4.0, 45.0  # degrees: a held object tilted this much is stood up
+STAND_GAP = 0.004  # ... lowered until its upright bottom is this far above the support
 
 
 @dataclass
@@ -216,7 +218,8 @@ def destination(ctx: Ctx, obj: str, target: str) -> np.ndarray:
     return np.array([dest[0], dest[1], s.support_top(foot, radius, {obj}, below=below)])
 
 
-def place(ctx: Ctx, obj: str, target: str) -> Plan:
+def place(ctx: Ctx, obj: str, target: str, stand: bool = False) -> Plan:
+    """`stand`: see `place_at` (the recovery expert)."""
     # a book into a narrow compartment or a roofed shelf goes in its own way (slot.py,
     # shelf.py, tip_push.py; imported here because they build on this module's `travel`)
     from pipeline.policies.scripted.shelf import open_side, shelf_opening, slide_into_shelf
@@ -243,12 +246,32 @@ def place(ctx: Ctx, obj: str, target: str) -> Plan:
         # from the open side, not lowered onto the board above
         yield from slide_in.slide_in(ctx, obj, comp)
         return
-    yield from place_at(ctx, obj, place_xy(ctx, obj, target), support_ceiling(ctx.scene.env, target))
+    yield from place_at(ctx, obj, place_xy(ctx, obj, target), support_ceiling(ctx.scene.env, target), stand=stand)
 
 
-def place_at(ctx: Ctx, obj: str, xy: np.ndarray, below: float = np.inf) -> Plan:
+def upright_hold(s: Scene, obj: str) -> tuple[np.ndarray, float] | None:
+    """For an upright-standing object that tilted in the hand (a moka pot held by its
+    handle swings about the fingers' axis): the grip site relative to the body, and its
+    height above the object's bottom, as they will be once the object stands upright
+    again. None when it is not tilted (or lies on its side: then it is put down as held)."""
+    from pipeline.policies.scripted.grasps import object_frame_boxes
+
+    boxes, body, rot, _ = object_frame_boxes(s, obj)
+    if not np.cos(np.radians(STAND_MAX_TILT)) < rot[2, 2] < np.cos(np.radians(STAND_MIN_TILT)):
+        return None
+    g = (s.eef() - body) @ rot  # grip site in the object's frame
+    heading = float(np.arctan2(rot[1, 0], rot[0, 0]))
+    c, si = np.cos(heading), np.sin(heading)
+    upright = np.array([[c, -si, 0.0], [si, c, 0.0], [0.0, 0.0, 1.0]])
+    return upright @ g, float(g[2] - boxes[:, 0, 2].min())
+
+
+def place_at(ctx: Ctx, obj: str, xy: np.ndarray, below: float = np.inf, stand: bool = False) -> Plan:
     """Carry the held object so its body comes down at `xy` on whatever supports it there
-    (ignoring boxes whose top is at or above `below`), release, retreat."""
+    (ignoring boxes whose top is at or above `below`), release, retreat. `stand`: an
+    upright object that tilted in the hand is lowered as if it stood upright, so its low
+    edge meets the support first and the pressing turns it upright in the fingers before
+    they open (released tilted, a pot falls over)."""
     s = ctx.scene
     env = s.env
     eef = s.eef()
@@ -256,6 +279,11 @@ def place_at(ctx: Ctx, obj: str, xy: np.ndarray, below: float = np.inf) -> Plan:
     box = s.box(obj)
     hold = eef - body  # grip site relative to the object body, kept while carrying
     bottom = eef[2] - box.lo[2]  # grip site above the object's bottom
+    carry_bottom, gap = bottom, 0.015
+    up = upright_hold(s, obj) if stand else None
+    if up is not None:  # down to just above the support: the low edge presses it upright
+        hold, bottom = up
+        gap = STAND_GAP
     radius = 0.6 * float(min(box.size[0], box.size[1])) / 2
     offset_xy = ctx.noise.place_offset()[:2]
     dest = np.asarray(xy, dtype=float)[:2] + offset_xy
@@ -263,8 +291,8 @@ def place_at(ctx: Ctx, obj: str, xy: np.ndarray, below: float = np.inf) -> Plan:
     support = s.support_top(foot, radius, {obj}, below=below)
     offset_z = abs(ctx.noise.place_offset()[2])
     ctx.note(place_offset=[offset_xy[0], offset_xy[1], offset_z])
-    release_z = support + 0.015 + bottom + offset_z
-    lift_z = s.path_clearance(box.centre, foot, radius, {obj}) + CARRY_CLEARANCE + bottom
+    release_z = support + gap + bottom + offset_z
+    lift_z = s.path_clearance(box.centre, foot, radius, {obj}) + CARRY_CLEARANCE + max(bottom, carry_bottom)
     goal = np.array([dest[0] + hold[0], dest[1] + hold[1], release_z])
     yaw = ctx.yaw_hold
     yield from travel(ctx, goal, yaw, 1.0, max(lift_z, release_z + 0.05))

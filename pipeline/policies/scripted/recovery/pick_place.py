@@ -27,7 +27,7 @@ def pick_place_once(ctx: Ctx, conjunct: tuple[str, ...], attempt: int) -> Plan:
             if ctx.truth is not None:
                 ctx.truth.end_hand(obj, False)
             return
-    yield from place(ctx, obj, target)
+    yield from place(ctx, obj, target, stand=True)
     if ctx.truth is not None:
         ctx.truth.end_hand(obj, s.satisfied(conjunct))
     if not s.satisfied(conjunct) and not carried(s, obj, checks.held(s)):
