@@ -29,6 +29,7 @@ HAND_CLEARANCE = 0.07  # grip site above obstacles when the hand moves empty
 CARRY_CLEARANCE = 0.04  # held object's bottom above obstacles in transit
 MAX_Z = 1.35  # keep targets inside the arm's comfortable workspace
 STAND_MIN_TILT, STAND_MAX_TILT = 4.0, 45.0  # degrees: a held object tilted this much is stood up
+REGION_INSIDE = 0.8  # fraction of a region's half extent a placed body is kept within
 STAND_GAP = 0.004  # ... lowered until its upright bottom is this far above the support
 
 
@@ -149,8 +150,12 @@ def _place_choice(ctx: Ctx, obj: str, target: str) -> tuple[np.ndarray, int]:
     fine = int(np.argmax(np.abs(np.asarray(s.env.joint_frame(r["joints"][0])["axis"][:2])))) if drawer else -1
     nx, ny = (41 if fine == 0 else 7 if drawer else 11), (41 if fine == 1 else 7 if drawer else 11)
     blocked = _drawer_clearance(s, obj, r["joints"][0], r["pos"][:2], half[:2], top) if drawer else (lambda p: 0)
-    for fx in np.linspace(-1.0, 1.0, nx):
-        for fy in np.linspace(-1.0, 1.0, ny):
+    # on a region (not in a drawer) the body must end inside it (LIBERO's `On` tests the body
+    # origin against the region's extent): a spot on its very edge, where a crowded region
+    # (the second moka pot beside the first) pushed it, left the body just outside
+    edge = 1.0 if drawer else REGION_INSIDE
+    for fx in np.linspace(-edge, edge, nx):
+        for fy in np.linspace(-edge, edge, ny):
             p = r["pos"][:2] + half[:2] * [fx, fy]
             # overlap (m^2) of the footprint with objects already there: least wins
             lo, hi = p - size / 2, p + size / 2
