@@ -31,6 +31,7 @@ MAX_Z = 1.35  # keep targets inside the arm's comfortable workspace
 STAND_MIN_TILT, STAND_MAX_TILT = 4.0, 45.0  # degrees: a held object tilted this much is stood up
 REGION_INSIDE = 0.8  # fraction of a region's half extent a placed body is kept within
 STAND_GAP = 0.004  # ... lowered until its upright bottom is this far above the support
+STAND_TOL = 0.016  # ... or the hand is this close to there
 
 
 @dataclass
@@ -309,7 +310,10 @@ def place_at(ctx: Ctx, obj: str, xy: np.ndarray, below: float = np.inf, stand: b
     t = ctx.noise.timing()
     ctx.note(release_timing=t)
     early = {"switch_gripper": -1.0, "switch_dist": 0.006 * -t} if t < 0 else {}
-    yield ctx.move(goal, gripper=1.0, speed=0.5, yaw=yaw, tol=0.01, max_steps=60, label="lower", **early)
+    # (stood up: the pot's low edge on the support stops the hand ~1 cm short of the goal;
+    # a wider tolerance lets go there instead of pressing out the step limit)
+    yield ctx.move(goal, gripper=1.0, speed=0.5, yaw=yaw, tol=0.01 if up is None else STAND_TOL, max_steps=60,
+                   label="lower", **early)
     yield Grip(-1.0, ctx.open_steps + max(t, 0), label="open")
     yield ctx.move(s.eef() + [0, 0, 0.08], yaw=yaw, tol=0.02, label="retreat")
 
