@@ -26,7 +26,7 @@ LONG_M = 0.12  # horizontal length beyond which a whole-object grasp goes to the
 TALL_M = 0.11  # objects taller than this may be carried by a handle
 HANDLE_THIN_M, HANDLE_OUT_M = 0.016, 0.055  # a handle part: thinner than this, this far out
 UPRIGHT_COS = np.cos(np.radians(20))  # body axis this close to vertical: standing upright
-YAW_BAND = np.radians(20)
+YAW_BAND = np.radians(20)  # a handle's yaw range reaches this far past pi/2 (see handle_grasp)
 YAWS = np.linspace(-np.pi / 2, np.pi / 2, 12, endpoint=False)
 # a standing book: thinner than SLAB_THIN_M, taller than SLAB_TALL_M, long. It is held near
 # its top edge so the fingers stay above a compartment's walls when it goes in (slot.py)

@@ -28,8 +28,8 @@ Plan = Iterator[Primitive]
 HAND_CLEARANCE = 0.07  # grip site above obstacles when the hand moves empty
 CARRY_CLEARANCE = 0.04  # held object's bottom above obstacles in transit
 MAX_Z = 1.35  # keep targets inside the arm's comfortable workspace
-STAND_MIN_TILT, STAND_MAX_TILT = 4.0, 45.0  # degrees: a held object tilted this much is stood up
 REGION_INSIDE = 0.8  # fraction of a region's half extent a placed body is kept within
+STAND_MIN_TILT, STAND_MAX_TILT = 4.0, 45.0  # degrees: a held object tilted this much is stood up
 STAND_GAP = 0.004  # ... lowered until its upright bottom is this far above the support
 STAND_TOL = 0.016  # ... or the hand is this close to there
 
