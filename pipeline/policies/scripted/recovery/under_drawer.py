@@ -57,6 +57,37 @@ def away_from_drawer(s, obj: str, joint: str, attempt: int, candidates: int = 6)
     return ranked[attempt % candidates]
 
 
+def beyond_sweep(s, obj: str, joint: str, sweep: np.ndarray) -> np.ndarray | None:
+    """A spot for the object's body just beyond the fully opened drawer (moved out along the
+    drawer's pull, 2.5 to 7.5 cm clear of it, and up to 9 cm across toward the robot): the
+    short way out of its sweep, close to where it goes in next. Of the spots clear of
+    everything, the nearest the robot base (lowering an object far out is slow: measured,
+    60 steps 0.81 m out). None when none is clear (then `free_spot`)."""
+    fr = s.env.joint_frame(joint)
+    pull = fr["axis"] * open_sign(fr["range"])
+    k = int(np.argmax(np.abs(pull[:2])))
+    d = float(np.sign(pull[k]))
+    box = s.box(obj)
+    body = s.env.object_pose(obj)[0][:2]
+    base = checks.robot_base(s)[:2]
+    toward = float(np.sign(base[1 - k] - body[1 - k]))
+    table = s.table_height()
+    others = [b for _, b in s.obstacle_boxes({obj}) if b[1, 2] > table + 0.005]
+    best = None
+    for gap in (0.025, 0.05, 0.075):
+        for across in (0.0, 0.03, 0.06, 0.09):
+            shift = np.zeros(2)
+            shift[k] = (sweep[1, k] + gap - box.lo[k]) if d > 0 else (sweep[0, k] - gap - box.hi[k])
+            shift[1 - k] = toward * across
+            lo, hi = box.lo[:2] + shift - 0.01, box.hi[:2] + shift + 0.01
+            if any(np.all(b[0, :2] <= hi) and np.all(lo <= b[1, :2]) for b in others):
+                continue
+            r = float(np.linalg.norm(body + shift - base))
+            if best is None or r < best[0]:
+                best = (r, body + shift)
+    return None if best is None else best[1]
+
+
 def push_in(ctx: Ctx, joint: str, dist: float) -> Plan:
     """A fist at the drawer's front pushes it in by `dist` (the fist closes on the way)."""
     s, env = ctx.scene, ctx.scene.env
@@ -106,7 +137,9 @@ def clear_from_under(ctx: Ctx, obj: str, region: str, attempt: int = 0) -> Plan:
         return
     here = s.env.object_pose(obj)[0]
     away = [p for p in goal_points(ctx) if float(np.linalg.norm(p[:2] - here[:2])) > 1e-6]
-    spot = checks.free_spot(s, obj, away, [sweep])
+    spot = beyond_sweep(s, obj, joint, sweep)
+    if spot is None:
+        spot = checks.free_spot(s, obj, away, [sweep])
     if spot is None:
         raise GiveUp(GiveUpReason.NO_PLAN, f"no free spot on the table to put {obj} aside")
     yield from place_at(ctx, obj, spot)
