@@ -165,3 +165,17 @@ def checks_lying(env, obj: str) -> bool:
     from pipeline.policies.scripted.recovery.lying_cup import lying_handle_grasp
 
     return lying_handle_grasp(Scene(env), obj) is not None
+
+
+def test_a_bowl_under_the_open_top_drawer_is_got_out_and_put_in():
+    task = tasks(["libero_goal"])[3]  # open the top drawer and put the bowl inside
+    with build_env(task) as env:
+        start(env)
+        set_joint(env, "wooden_cabinet_1_top_level", -0.145)  # open (LIBERO: below -0.14)
+        drawer = env.joint_part_boxes("wooden_cabinet_1_top_level")
+        front = [float(drawer[:, 1, 0].max()), float(drawer[:, 1, 1].max()) - 0.02]  # under its corner
+        set_pose(env, "akita_black_bowl_1", [*front, env.object_pose("akita_black_bowl_1")[0][2] + 0.01])
+        assert checks.overhanging_drawer(Scene(env), "akita_black_bowl_1") is not None
+        # (pushed in past 6 cm, the drawer is opened again by its handle: ~530 steps here)
+        result, policy = finish(env, task, horizon=650)
+        assert result.success, policy.give_up_detail
