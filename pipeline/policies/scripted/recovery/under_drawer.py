@@ -59,7 +59,7 @@ def away_from_drawer(s, obj: str, joint: str, attempt: int, candidates: int = 6)
 
 def beyond_sweep(s, obj: str, joint: str, sweep: np.ndarray) -> np.ndarray | None:
     """A spot for the object's body just beyond the fully opened drawer (moved out along the
-    drawer's pull, 2.5 to 7.5 cm clear of it, and up to 9 cm across toward the robot): the
+    drawer's pull, 6 to 10 cm clear of it, and up to 9 cm across toward the robot): the
     short way out of its sweep, close to where it goes in next. Of the spots clear of
     everything, the nearest the robot base (lowering an object far out is slow: measured,
     60 steps 0.81 m out). None when none is clear (then `free_spot`)."""
@@ -74,7 +74,7 @@ def beyond_sweep(s, obj: str, joint: str, sweep: np.ndarray) -> np.ndarray | Non
     table = s.table_height()
     others = [b for _, b in s.obstacle_boxes({obj}) if b[1, 2] > table + 0.005]
     best = None
-    for gap in (0.025, 0.05, 0.075):
+    for gap in (0.06, 0.08, 0.1):  # (`checks.under_sweep` wants it 5 cm clear)
         for across in (0.0, 0.03, 0.06, 0.09):
             shift = np.zeros(2)
             shift[k] = (sweep[1, k] + gap - box.lo[k]) if d > 0 else (sweep[0, k] - gap - box.hi[k])
