@@ -33,6 +33,7 @@ def exported(tmp_path_factory, scene_source) -> tuple[Path, object]:
                    {"ep-a": (good, scene_source.bddl_text), "ep-b": (good, scene_source.bddl_text)})
     cfg = release_config(run, lerobot_image_size=SIZE)
     build(cfg)
+    assert (cfg.executor.kind, cfg.executor.workers) == ("local", 2)  # 2 worker processes, one episode each
     return export(cfg), scene_source
 
 
@@ -137,3 +138,19 @@ def test_lerobots_own_dataset_class_opens_the_export(exported, tmp_path):
         theirs = np.frombuffer(base64.b64decode(mid[key]["rgb24"]), np.uint8).reshape(SIZE, SIZE, 3)
         diff = [np.abs(theirs.astype(int) - f.astype(int)).mean() for f in ours]
         assert diff[6] < 0.5 and int(np.argmin(diff)) == 6, (key, diff)
+
+
+def _files(root: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(root)): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()}
+
+
+def test_one_worker_writes_the_same_dataset_byte_for_byte(exported, tmp_path):
+    out, _ = exported  # 2 workers: the group of two episodes (one model) was split across them
+    cfg = release_config(out.parent, lerobot_image_size=SIZE)
+    one = cfg.model_copy(update={"executor": cfg.executor.model_copy(update={"kind": "inline"})})  # this process
+    single = export(one, tmp_path / "one", only=["rollouts"])
+    ours, theirs = _files(out / "rollouts"), _files(single / "rollouts")
+    assert sorted(ours) == sorted(theirs) and len(ours) == 4 + 2 + 5  # 4 videos, 2 parquet, 5 meta files
+    assert ours == theirs  # x264 is deterministic: the same frames give the same MP4 bytes
+    for name in ("000000.json", "000001.json"):
+        assert (out / "_work/rollouts" / name).read_bytes() == (single / "_work/rollouts" / name).read_bytes()
