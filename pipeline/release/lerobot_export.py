@@ -265,11 +265,18 @@ def run(cfg: Config, out: Path | None = None, only: list[str] | None = None) -> 
 
     console = Console()
     runner = Runner(make_executor(cfg.executor), console=console)
+    failed = []
     for name, episodes in datasets.items():
         if name == "recoveries" and not episodes:
             console.print("[yellow]recoveries[/yellow]: no recovery demos (run `recover demos` first); skipped")
             continue
-        frames = export_dataset(episodes, out / name, out / "_work" / name, size, runner,
-                                cfg.release.lerobot_render_quality)
+        try:
+            frames = export_dataset(episodes, out / name, out / "_work" / name, size, runner,
+                                    cfg.release.lerobot_render_quality)
+        except FatalError as e:  # episodes set aside: the other datasets still go on
+            failed.append(str(e))
+            continue
         console.print(f"[green]{name}[/green]: {len(episodes)} episode(s), {frames} frames -> {out / name}")
+    if failed:
+        raise FatalError("\n".join(failed))
     return out
