@@ -1,9 +1,9 @@
 """Wall and CPU time of `recover export-lerobot`'s recoveries dataset per demo: 1 vs 2 workers,
 standard vs fast render quality, side by side in one run.
 
-    nice -n 10 .venv/bin/python benchmarks/lerobot_export_speed.py [--run RUN] [--demos 8] [--work DIR]
+    nice -n 10 .venv/bin/python benchmarks/lerobot_export_speed.py [--run RUN] [--demos 4] [--per-scene 2] [--work DIR]
 
-Copies the first `--demos` recovery demos of RUN (in the export's order: by scene id) with
+Copies the first `--demos` recovery demos of RUN (by scene id, at most `--per-scene` each) with
 their states, step logs and RUN's release into a scratch run under `--work` (RUN is only
 read), then exports that run's `recoveries` dataset once per option, each into its own
 fresh folder, through the same `lerobot_export.run` the CLI calls. Reports seconds per demo
@@ -30,14 +30,19 @@ OPTIONS = {"standard, 1 worker": ("standard", 1), "standard, 2 workers": ("stand
            "fast, 1 worker": ("fast", 1), "fast, 2 workers": ("fast", 2)}
 
 
-def scratch_run(src: Path, work: Path, n: int):
-    """A run folder under `work` holding the first `n` demos of `src` and its release."""
+def scratch_run(src: Path, work: Path, n: int, per_scene: int):
+    """A run folder under `work` holding the first `n` demos of `src` (at most `per_scene` of a
+    scene) and its release."""
     from pipeline.config import load_config
     from pipeline.layout import EpisodeFiles, RunLayout
     from pipeline.release.recovery_demos import read_demos, write_demos
 
     cfg = load_config(src / "config.resolved.yaml")
-    demos = sorted(read_demos(RunLayout.of(cfg).recoveries.demos), key=lambda d: (d.scene_id, d.demo_index))[:n]
+    demos, per = [], {}
+    for d in sorted(read_demos(RunLayout.of(cfg).recoveries.demos), key=lambda d: (d.scene_id, d.demo_index)):
+        if len(demos) < n and per.get(d.scene_id, 0) < per_scene:
+            demos.append(d)
+            per[d.scene_id] = per.get(d.scene_id, 0) + 1
     run = work / "run"
     shutil.rmtree(run, ignore_errors=True)
     new = cfg.model_copy(update={"run": cfg.run.model_copy(update={"output_dir": run})})
@@ -67,12 +72,15 @@ def decoded(path: Path) -> np.ndarray:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--run", type=Path, default=Path("/work/runs/final100"))
-    ap.add_argument("--demos", type=int, default=8)
+    ap.add_argument("--demos", type=int, default=4)
+    # 2 per scene: with 2 workers each scene's model is one shard of equal size (the export's
+    # shards follow models, so a sample of unequal scenes would measure the imbalance instead)
+    ap.add_argument("--per-scene", type=int, default=2)
     ap.add_argument("--work", type=Path, default=Path("/tmp/lerobot_export_bench"))
     args = ap.parse_args()
     from pipeline.release.lerobot_export import run as export
 
-    cfg, demos = scratch_run(args.run, args.work, args.demos)
+    cfg, demos = scratch_run(args.run, args.work, args.demos, args.per_scene)
     frames = sum(d.steps for d in demos)
     print(f"{len(demos)} demos from {len({d.scene_id for d in demos})} scenes, {frames} frames, "
           f"{cfg.release.lerobot_image_size} px, 2 cameras; os.cpu_count()={os.cpu_count()}, "
