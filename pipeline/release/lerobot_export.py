@@ -220,7 +220,7 @@ class ExportStage(Stage[ExportUnit]):
         meta = export_episode(env, ep, unit.index, unit.start, unit.task_index, Path(self.dataset), self.size,
                               self.quality)
         write_json(self.root / f"{unit.unit_id}.json", meta)  # before the marker (the runner's, last)
-        return UnitResult()
+        return UnitResult(ok=True)  # the bar's "ok n/m": episodes written
 
     def set_aside(self, unit: ExportUnit, error: Exception) -> UnitResult:
         return UnitResult.set_aside(type(error).__name__, f"{unit.episode.key}: {error}")
