@@ -10,7 +10,7 @@ calls it again from the live state.
 from __future__ import annotations
 
 from pipeline.policies.scripted.recovery import checks
-from pipeline.policies.scripted.recovery.stand_book import stand_tilt, stand_up
+from pipeline.policies.scripted.recovery.stand_book import quarter_turn, stand_tilt, stand_up, too_steep
 from pipeline.policies.scripted.stack import carried
 from pipeline.policies.scripted.skills import Ctx, Plan, destination, free_hand, grasp, place
 
@@ -21,6 +21,11 @@ def pick_place_once(ctx: Ctx, conjunct: tuple[str, ...], attempt: int) -> Plan:
     ctx.begin("pick_place", conjunct, obj, target)
     if not carried(s, obj, checks.held(s)):
         book = stand_tilt(s, obj)
+        if book is not None and too_steep(book):
+            yield from quarter_turn(ctx, obj, book)  # nearer standing: the next attempt goes on
+            if ctx.truth is not None:
+                ctx.truth.end_hand(obj, False)
+            return
         if book is not None:
             yield from stand_up(ctx, obj, book)
         else:

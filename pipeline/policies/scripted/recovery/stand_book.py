@@ -12,8 +12,13 @@ is tilted from vertical. Output: primitives that
    upright, held near its top edge like a standing book grasped from above.
 A top-down grasp cannot hold such a book: every horizontal width of a leaning book is wider
 than the open fingers, and a rim grasp slips off its faces (measured: 4 of 4 missed).
-The hand turns at most `MAX_TILT` from pointing down; a book tilted further (upside down)
-is not this skill's (`stand_tilt` is then None).
+The hand turns at most `MAX_TILT` from pointing down (a hand pointing level, low over the
+table, is out of the wrist's range: measured 25 deg short). A book tilted further (lying on
+its side, or standing on its top edge, upside down: its origin then cannot get into a
+compartment) is turned by a quarter at a time: `quarter_turn` holds it by a top corner with
+the hand pitched 45 deg along the book's plane, lifts it, pitches the hand 45 deg the other
+way, sets it down where it was and lets go. Upside down takes two quarters, then the book
+stands and is grasped from above as usual.
 """
 
 from __future__ import annotations
@@ -24,15 +29,22 @@ import numpy as np
 
 from pipeline.policies.scripted.grasps import SLAB_GRIP_BELOW_TOP, SLAB_RATIO, SLAB_THIN_M
 from pipeline.policies.scripted.primitives import Grip, axis_angle_matrix
+from pipeline.policies.scripted.recovery import checks
 from pipeline.policies.scripted.scene import Scene
 from pipeline.policies.scripted.skills import HAND_CLEARANCE, Ctx, Plan, travel
 
 UPRIGHT_DEG = 20.0  # up axis within this of vertical: standing, grasped from above as usual
-MAX_TILT = np.radians(100.0)  # most the hand is tilted from pointing down
+MAX_TILT = np.radians(75.0)  # most the hand is tilted from pointing down (further: out of reach)
 BOTTOM_FRAC = 0.1  # the origin lies within this fraction of the height from one end: a book
 BACK_OFF_M = 0.09  # grip site this far up the book's axis from the grasp before going in
 LIFT_M = 0.12
 SETTLE_STEPS = 10
+STEEP = np.radians(65.0)  # hand tilts beyond this are made above the start point
+TURN_ABOVE_M = 0.15
+TURN_CLEAR_M = 0.05  # lowest corner above the table while the book turns
+PITCH = np.radians(45.0)  # hand pitch either way for a quarter turn
+CORNER_DEPTH_M = 0.03  # grip site inside the corner along the hand's axis
+PUT_DOWN_GAP = 0.008  # book's lowest point above the table when it is let go
 
 
 @dataclass(frozen=True)
@@ -40,6 +52,8 @@ class BookAxes:
     up: np.ndarray  # world unit vector from the bottom edge (body origin) to the top edge
     thin: np.ndarray  # world unit normal of its faces
     top_mid: np.ndarray  # world point: middle of the top edge, mid-thickness
+    long: np.ndarray  # world unit vector along its bottom edge
+    ends: tuple[np.ndarray, np.ndarray]  # world points: middles of the two ends along `long`
 
 
 def book_axes(scene: Scene, obj: str) -> BookAxes | None:
@@ -62,19 +76,31 @@ def book_axes(scene: Scene, obj: str) -> BookAxes | None:
     if ends[u] > BOTTOM_FRAC:
         return None
     sign = 1.0 if abs(lo[u]) < abs(hi[u]) else -1.0
-    mid = (lo + hi) / 2
+    centre = (lo + hi) / 2
+    mid = centre.copy()
     mid[u] = hi[u] if sign > 0 else lo[u]
-    return BookAxes(up=rot[:, u] * sign, thin=rot[:, t], top_mid=pos + rot @ mid)
+    w = next(i for i in others if i != u)
+    a, b = centre.copy(), centre.copy()
+    a[w], b[w] = lo[w], hi[w]
+    return BookAxes(up=rot[:, u] * sign, thin=rot[:, t], top_mid=pos + rot @ mid, long=rot[:, w],
+                    ends=(pos + rot @ a, pos + rot @ b))
 
 
 def stand_tilt(scene: Scene, obj: str) -> BookAxes | None:
-    """The book's axes when it is a book tilted out of standing that this skill can turn
-    upright (tilt over UPRIGHT_DEG, at most MAX_TILT); None otherwise."""
+    """The book's axes when it is a book tilted out of standing (tilt over UPRIGHT_DEG);
+    None otherwise. `too_steep` says whether it must first be turned by a quarter."""
     ax = book_axes(scene, obj)
     if ax is None:
         return None
-    tilt = float(np.arccos(np.clip(ax.up[2], -1.0, 1.0)))
-    return ax if np.radians(UPRIGHT_DEG) < tilt <= MAX_TILT else None
+    return ax if _tilt(ax.up) > np.radians(UPRIGHT_DEG) else None
+
+
+def too_steep(ax: BookAxes) -> bool:
+    return _tilt(ax.up) > MAX_TILT
+
+
+def _tilt(up: np.ndarray) -> float:
+    return float(np.arccos(np.clip(up[2], -1.0, 1.0)))
 
 
 def _yaw_of(closing: np.ndarray) -> float:
@@ -83,7 +109,7 @@ def _yaw_of(closing: np.ndarray) -> float:
 
 
 def tilted_grasp(ax: BookAxes) -> tuple[float, np.ndarray]:
-    """(yaw, approach) of a hand pointing along -up, closing
+    """(yaw, approach) of a hand pointing along -up (the `up` given), closing
     across the faces. `hand_orientation(yaw, approach)` is the top-down hand at `yaw` turned
     about the horizontal axis cross(-z, approach); its closing axis must then be `thin`."""
     a = -ax.up
@@ -98,6 +124,76 @@ def tilted_grasp(ax: BookAxes) -> tuple[float, np.ndarray]:
 
 
 def stand_up(ctx: Ctx, obj: str, ax: BookAxes) -> Plan:
+    yield from _edge_grasp_turn(ctx, obj, ax)
+    # the book swings on in the fingers for a few steps after the hand stopped turning; the
+    # slot skill measures its footprint next
+    yield Grip(1.0, SETTLE_STEPS, label="settle")
+
+
+def quarter_turn(ctx: Ctx, obj: str, ax: BookAxes) -> Plan:
+    """Turn the book by a quarter in its own plane toward standing: hold it by a top corner
+    with the hand pitched PITCH one way along its plane, lift, pitch the hand as far the
+    other way, set it down where it was, let go."""
+    s = ctx.scene
+    side = np.cross(ax.thin, ax.up)
+    corners = _plane_corners(ax)
+    base = checks.robot_base(s)
+    away = ax.top_mid[:2] - base[:2]
+    away /= max(float(np.linalg.norm(away)), 1e-6)
+    m = np.cross(ax.thin, [0.0, 0.0, 1.0])  # the horizontal direction in the book's plane
+    m /= max(float(np.linalg.norm(m)), 1e-6)
+    down = np.array([0.0, 0.0, -1.0])
+    best = None
+    for sg in (1.0, -1.0):  # pitch the hand toward +m, then toward -m; or the other way
+        a1 = np.cos(PITCH) * down + np.sin(PITCH) * m * sg
+        a2 = np.cos(PITCH) * down - np.sin(PITCH) * m * sg
+        turn = axis_angle_matrix(np.cross(a1, a2), 2 * PITCH)
+        gain = float((turn @ ax.up)[2] - ax.up[2])  # how much nearer standing it gets
+        # pointing the hand away from the robot is out of the wrist's range sooner (measured)
+        reach = max(float(a1[:2] @ away), float(a2[:2] @ away))
+        score = -gain + 0.3 * max(reach, 0.0)
+        if best is None or score < best[0]:
+            best = (score, a1, a2)
+    _, a1, a2 = best
+    corner = max(corners, key=lambda p: float(-a1 @ p))  # the one the hand comes to first
+    grip = corner + a1 * CORNER_DEPTH_M
+    held = BookAxes(up=-a1, thin=ax.thin, top_mid=grip + (-a1) * SLAB_GRIP_BELOW_TOP, long=side, ends=ax.ends)
+    # held by a corner, the book swings through up to its diagonal below the fingers: lift it
+    # that far clear of the table
+    reach = max(float(np.linalg.norm(c - grip)) for c in corners)
+    lift = reach + TURN_CLEAR_M - (grip[2] - s.table_height())
+    was = s.box(obj).centre[:2]  # a free spot: the book stood there
+    yield from _edge_grasp_turn(ctx, obj, held, lift=max(lift, 0.04), to=a2, rot_tol=0.06)
+    yield Grip(1.0, SETTLE_STEPS // 2, label="settle")
+    box = s.box(obj)
+    gap = box.lo[2] - s.support_top(was, 0.01, {obj})
+    # turning about the grip site carried the book aside: back over where it was
+    down = s.eef() + [*(was - box.centre[:2]), -max(gap - PUT_DOWN_GAP, 0.0)]
+    yaw2 = ctx.yaw_hold
+    ctx.approach_hold = a2
+    try:
+        yield ctx.move(down, gripper=1.0, speed=0.5, yaw=yaw2, approach=a2, tol=0.008, max_steps=35,
+                       label="put_down")
+        yield Grip(-1.0, ctx.open_steps + 4, label="open")
+        yield ctx.move(s.eef() - a2 * 0.04, yaw=yaw2, approach=a2, tol=0.015, max_steps=12, label="back_off")
+    finally:
+        ctx.approach_hold = None
+    yield ctx.move(s.eef() + [0.0, 0.0, 0.08], yaw=yaw2, tol=0.03, max_steps=20, label="retreat")
+
+
+def _plane_corners(ax: BookAxes) -> list[np.ndarray]:
+    """The book's four corners in its mid-plane (world)."""
+    side = np.cross(ax.thin, ax.up)
+    half = 0.5 * float(np.linalg.norm(ax.ends[1] - ax.ends[0]))
+    centre_top = ax.top_mid
+    centre_bottom = (ax.ends[0] + ax.ends[1]) - centre_top  # ends' mean is the centre
+    return [c + side * s * half for c in (centre_top, centre_bottom) for s in (-1.0, 1.0)]
+
+
+def _edge_grasp_turn(ctx: Ctx, obj: str, ax: BookAxes, lift: float = LIFT_M, to: np.ndarray | None = None,
+                     rot_tol: float = 0.03) -> Plan:
+    """Grasp the edge at `ax.top_mid` with the hand pointing along -`ax.up`, lift, turn the
+    hand down (`ax.up` then points up), or to point along `to`."""
     s = ctx.scene
     yaw, approach = tilted_grasp(ax)
     grip = ax.top_mid - ax.up * SLAB_GRIP_BELOW_TOP
@@ -106,18 +202,34 @@ def stand_up(ctx: Ctx, obj: str, ax: BookAxes) -> Plan:
     if not s.gripper_open():
         yield Grip(-1.0, ctx.open_steps + 4, label="release")
     lift_z = s.path_clearance(s.eef(), start, 0.06, {obj}) + HAND_CLEARANCE
-    yield from travel(ctx, start, yaw, -1.0, max(lift_z, start[2]))
+    steep = _tilt(ax.up) > STEEP
     ctx.yaw_hold, ctx.approach_hold = yaw, approach  # Grip primitives hold this orientation
     try:
-        yield ctx.move(start, yaw=yaw, approach=approach, tol=0.006, rot_tol=0.03, max_steps=80, label="tilt")
-        yield ctx.move(grip, speed=0.2, yaw=yaw, approach=approach, tol=0.006, max_steps=80, label="edge")
+        if steep:
+            yield from travel(ctx, start, yaw, -1.0, max(lift_z, start[2] + TURN_ABOVE_M))
+        else:  # the hand turns on the way over
+            eef = s.eef()
+            if eef[2] < lift_z - 0.015:
+                yield ctx.move([eef[0], eef[1], lift_z], yaw=yaw, tol=0.02, label="lift")
+            over = np.array([start[0], start[1], max(lift_z, start[2])])
+            yield ctx.move(over, yaw=yaw, approach=approach, tol=0.015, label="transport")
+        if steep:  # turn the hand up high first: turning it while going down
+            # a long way, the controller lets the hand drift up and away (measured)
+            yield ctx.move(start + [0.0, 0.0, TURN_ABOVE_M], yaw=yaw, approach=approach, tol=0.01, rot_tol=0.04,
+                           max_steps=100, label="tilt")
+        yield ctx.move(start, yaw=yaw, approach=approach, tol=0.006, rot_tol=rot_tol, max_steps=80, label="tilt")
+        yield ctx.move(grip, speed=0.3, yaw=yaw, approach=approach, tol=0.006, max_steps=80, label="edge")
         yield Grip(1.0, ctx.close_steps, label="close")
-        up = s.eef() + [0.0, 0.0, LIFT_M]
+        up = s.eef() + [0.0, 0.0, lift]
         yield ctx.move(up, gripper=1.0, speed=0.6, yaw=yaw, approach=approach, tol=0.02, max_steps=50,
                        label="pick_lift")
     finally:
         ctx.approach_hold = None
+    if to is not None:
+        # the pitch about the closing axis undone and redone the other way: same yaw
+        ctx.approach_hold = to
+        yield ctx.move(s.eef(), gripper=1.0, yaw=yaw, approach=to, tol=0.03, rot_tol=0.06, max_steps=90,
+                       label="turn")
+        ctx.approach_hold = None
+        return
     yield ctx.move(s.eef(), gripper=1.0, yaw=yaw, tol=0.03, rot_tol=0.06, max_steps=80, label="upright")
-    # the book swings on in the fingers for a few steps after the hand stopped turning; the
-    # slot skill measures its footprint next
-    yield Grip(1.0, SETTLE_STEPS, label="settle")
