@@ -35,6 +35,7 @@ from pipeline.policies.scripted.skills import HAND_CLEARANCE, Ctx, Plan, travel
 
 UPRIGHT_DEG = 20.0  # up axis within this of vertical: standing, grasped from above as usual
 MAX_TILT = np.radians(75.0)  # most the hand is tilted from pointing down (further: out of reach)
+FACE_UP = 0.6  # faces' normal more vertical than this (sine of its elevation): lying on its face
 BOTTOM_FRAC = 0.1  # the origin lies within this fraction of the height from one end: a book
 BACK_OFF_M = 0.09  # grip site this far up the book's axis from the grasp before going in
 LIFT_M = 0.12
@@ -90,8 +91,8 @@ def stand_tilt(scene: Scene, obj: str) -> BookAxes | None:
     """The book's axes when it is a book tilted out of standing (tilt over UPRIGHT_DEG);
     None otherwise. `too_steep` says whether it must first be turned by a quarter."""
     ax = book_axes(scene, obj)
-    if ax is None:
-        return None
+    if ax is None or abs(float(ax.thin[2])) > FACE_UP:
+        return None  # lying on its face: no edge a hand can close across is up
     return ax if _tilt(ax.up) > np.radians(UPRIGHT_DEG) else None
 
 
