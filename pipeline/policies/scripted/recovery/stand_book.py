@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pipeline.policies.scripted.grasps import SLAB_GRIP_BELOW_TOP, SLAB_RATIO, SLAB_THIN_M
-from pipeline.policies.scripted.primitives import Grip, axis_angle_matrix
+from pipeline.policies.scripted.primitives import Grip, axis_angle_matrix, hand_orientation, rotation_error
 from pipeline.policies.scripted.recovery import checks
 from pipeline.policies.scripted.scene import Scene
 from pipeline.policies.scripted.skills import HAND_CLEARANCE, Ctx, Plan, travel
@@ -40,6 +40,8 @@ BOTTOM_FRAC = 0.1  # the origin lies within this fraction of the height from one
 BACK_OFF_M = 0.09  # grip site this far up the book's axis from the grasp before going in
 LIFT_M = 0.12
 SETTLE_STEPS = 10
+TILT_STEPS = 60
+REACH_TOL = 0.1  # radians off the tilted orientation after TILT_STEPS: out of reach
 STEEP = np.radians(65.0)  # hand tilts beyond this are made above the start point
 TURN_ABOVE_M = 0.15
 TURN_CLEAR_M = 0.05  # lowest corner above the table while the book turns
@@ -182,6 +184,11 @@ def quarter_turn(ctx: Ctx, obj: str, ax: BookAxes) -> Plan:
     yield ctx.move(s.eef() + [0.0, 0.0, 0.08], yaw=yaw2, tol=0.03, max_steps=20, label="retreat")
 
 
+def _rot_off(s: Scene, yaw: float, approach: np.ndarray | None) -> float:
+    """Radians between the hand's orientation now and the one asked for."""
+    return float(np.linalg.norm(rotation_error(hand_orientation(yaw, approach), s.env.eef_pose()[1])))
+
+
 def _plane_corners(ax: BookAxes) -> list[np.ndarray]:
     """The book's four corners in its mid-plane (world)."""
     side = np.cross(ax.thin, ax.up)
@@ -202,23 +209,26 @@ def _edge_grasp_turn(ctx: Ctx, obj: str, ax: BookAxes, lift: float = LIFT_M, to:
     ctx.note(stand_book=True)
     if not s.gripper_open():
         yield Grip(-1.0, ctx.open_steps + 4, label="release")
-    lift_z = s.path_clearance(s.eef(), start, 0.06, {obj}) + HAND_CLEARANCE
+    # the book itself counts: the hand must not sweep it over on the way (measured)
+    lift_z = s.path_clearance(s.eef(), start, 0.06, set()) + HAND_CLEARANCE
     steep = _tilt(ax.up) > STEEP
     ctx.yaw_hold, ctx.approach_hold = yaw, approach  # Grip primitives hold this orientation
     try:
-        if steep:
-            yield from travel(ctx, start, yaw, -1.0, max(lift_z, start[2] + TURN_ABOVE_M))
-        else:  # the hand turns on the way over
-            eef = s.eef()
-            if eef[2] < lift_z - 0.015:
-                yield ctx.move([eef[0], eef[1], lift_z], yaw=yaw, tol=0.02, label="lift")
-            over = np.array([start[0], start[1], max(lift_z, start[2])])
-            yield ctx.move(over, yaw=yaw, approach=approach, tol=0.015, label="transport")
+        # over the start point with the hand pointing down, then tilted there (turning it on
+        # the way over took as long, and went wrong where the tilt is out of reach)
+        yield from travel(ctx, start, yaw, -1.0, max(lift_z, start[2] + (TURN_ABOVE_M if steep else 0.0)))
         if steep:  # turn the hand up high first: turning it while going down
             # a long way, the controller lets the hand drift up and away (measured)
             yield ctx.move(start + [0.0, 0.0, TURN_ABOVE_M], yaw=yaw, approach=approach, tol=0.01, rot_tol=0.04,
                            max_steps=100, label="tilt")
-        yield ctx.move(start, yaw=yaw, approach=approach, tol=0.006, rot_tol=rot_tol, max_steps=80, label="tilt")
+        yield ctx.move(start, yaw=yaw, approach=approach, tol=0.006, rot_tol=rot_tol, max_steps=TILT_STEPS, label="tilt")
+        if _rot_off(s, yaw, approach) > REACH_TOL:
+            # out of the wrist's range this way round (which way is, depends on where the book
+            # lies: measured both ways): the hand turned by half a turn about its axis, same grasp
+            yaw = yaw - np.pi if yaw > 0 else yaw + np.pi
+            ctx.yaw_hold = yaw
+            yield ctx.move(start, yaw=yaw, approach=approach, tol=0.006, rot_tol=rot_tol, max_steps=TILT_STEPS,
+                           label="tilt")
         yield ctx.move(grip, speed=0.3, yaw=yaw, approach=approach, tol=0.006, max_steps=80, label="edge")
         yield Grip(1.0, ctx.close_steps, label="close")
         up = s.eef() + [0.0, 0.0, lift]
