@@ -29,7 +29,6 @@ import numpy as np
 
 from pipeline.policies.scripted.grasps import SLAB_GRIP_BELOW_TOP, SLAB_RATIO, SLAB_THIN_M
 from pipeline.policies.scripted.primitives import Grip, axis_angle_matrix, hand_orientation, rotation_error
-from pipeline.policies.scripted.recovery import checks
 from pipeline.policies.scripted.scene import Scene
 from pipeline.policies.scripted.skills import HAND_CLEARANCE, Ctx, Plan, travel
 
@@ -38,11 +37,11 @@ MAX_TILT = np.radians(75.0)  # most the hand is tilted from pointing down (furth
 FACE_UP = 0.6  # faces' normal more vertical than this (sine of its elevation): lying on its face
 BOTTOM_FRAC = 0.1  # the origin lies within this fraction of the height from one end: a book
 BACK_OFF_M = 0.09  # grip site this far up the book's axis from the grasp before going in
-LIFT_M = 0.12
-SETTLE_STEPS = 10
+LIFT_M = 0.12  # lift after closing, before the hand turns
+SETTLE_STEPS = 10  # the book swings on in the fingers this long after the hand stopped turning
 TILT_STEPS = 60
 REACH_TOL = 0.1  # radians off the tilted orientation after TILT_STEPS: out of reach
-STEEP = np.radians(65.0)  # hand tilts beyond this are made above the start point
+STEEP = np.radians(65.0)  # hand tilts beyond this are made TURN_ABOVE_M above the start point
 TURN_ABOVE_M = 0.15
 TURN_CLEAR_M = 0.05  # lowest corner above the table while the book turns
 PITCH = np.radians(45.0)  # hand pitch either way for a quarter turn
@@ -140,9 +139,6 @@ def quarter_turn(ctx: Ctx, obj: str, ax: BookAxes) -> Plan:
     s = ctx.scene
     side = np.cross(ax.thin, ax.up)
     corners = _plane_corners(ax)
-    base = checks.robot_base(s)
-    away = ax.top_mid[:2] - base[:2]
-    away /= max(float(np.linalg.norm(away)), 1e-6)
     m = np.cross(ax.thin, [0.0, 0.0, 1.0])  # the horizontal direction in the book's plane
     m /= max(float(np.linalg.norm(m)), 1e-6)
     down = np.array([0.0, 0.0, -1.0])
@@ -152,11 +148,8 @@ def quarter_turn(ctx: Ctx, obj: str, ax: BookAxes) -> Plan:
         a2 = np.cos(PITCH) * down - np.sin(PITCH) * m * sg
         turn = axis_angle_matrix(np.cross(a1, a2), 2 * PITCH)
         gain = float((turn @ ax.up)[2] - ax.up[2])  # how much nearer standing it gets
-        # pointing the hand away from the robot is out of the wrist's range sooner (measured)
-        reach = max(float(a1[:2] @ away), float(a2[:2] @ away))
-        score = -gain + 0.3 * max(reach, 0.0)
-        if best is None or score < best[0]:
-            best = (score, a1, a2)
+        if best is None or gain > best[0]:
+            best = (gain, a1, a2)
     _, a1, a2 = best
     corner = max(corners, key=lambda p: float(-a1 @ p))  # the one the hand comes to first
     grip = corner + a1 * CORNER_DEPTH_M
@@ -221,7 +214,8 @@ def _edge_grasp_turn(ctx: Ctx, obj: str, ax: BookAxes, lift: float = LIFT_M, to:
             # a long way, the controller lets the hand drift up and away (measured)
             yield ctx.move(start + [0.0, 0.0, TURN_ABOVE_M], yaw=yaw, approach=approach, tol=0.01, rot_tol=0.04,
                            max_steps=100, label="tilt")
-        yield ctx.move(start, yaw=yaw, approach=approach, tol=0.006, rot_tol=rot_tol, max_steps=TILT_STEPS, label="tilt")
+        yield ctx.move(start, yaw=yaw, approach=approach, tol=0.006, rot_tol=rot_tol, max_steps=TILT_STEPS,
+                       label="tilt")
         if _rot_off(s, yaw, approach) > REACH_TOL:
             # out of the wrist's range this way round (which way is, depends on where the book
             # lies: measured both ways): the hand turned by half a turn about its axis, same grasp
