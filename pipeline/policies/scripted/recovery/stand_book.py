@@ -170,11 +170,11 @@ def quarter_turn(ctx: Ctx, obj: str, ax: BookAxes) -> Plan:
     try:
         yield ctx.move(down, gripper=1.0, speed=0.5, yaw=yaw2, approach=a2, tol=0.008, max_steps=35,
                        label="put_down")
-        yield Grip(-1.0, ctx.open_steps + 4, label="open")
+        yield Grip(-1.0, ctx.open_steps, label="open")
         yield ctx.move(s.eef() - a2 * 0.04, yaw=yaw2, approach=a2, tol=0.015, max_steps=12, label="back_off")
     finally:
         ctx.approach_hold = None
-    yield ctx.move(s.eef() + [0.0, 0.0, 0.08], yaw=yaw2, tol=0.03, max_steps=20, label="retreat")
+    yield ctx.move(s.eef() + [0.0, 0.0, 0.05], yaw=yaw2, tol=0.03, max_steps=15, label="retreat")
 
 
 def _rot_off(s: Scene, yaw: float, approach: np.ndarray | None) -> float:
