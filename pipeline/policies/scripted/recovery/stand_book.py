@@ -175,6 +175,13 @@ def quarter_turn(ctx: Ctx, obj: str, ax: BookAxes) -> Plan:
     finally:
         ctx.approach_hold = None
     yield ctx.move(s.eef() + [0.0, 0.0, 0.05], yaw=yaw2, tol=0.03, max_steps=15, label="retreat")
+    if abs(yaw2) > np.pi / 2 + 0.3:
+        # the hand was turned half about its axis (out of range the other way): turn it back
+        # up here, or the next grasp turns the wrist on its way down and knocks the book over
+        # (measured)
+        ctx.yaw_hold = yaw2 - np.pi if yaw2 > 0 else yaw2 + np.pi
+        yield ctx.move(s.eef() + [0.0, 0.0, 0.04], yaw=ctx.yaw_hold, tol=0.03, rot_tol=0.1, max_steps=40,
+                       label="unwind")
 
 
 def _rot_off(s: Scene, yaw: float, approach: np.ndarray | None) -> float:
