@@ -307,6 +307,11 @@ def place(ctx: Ctx, obj: str, target: str) -> Plan:
         # from the open side, not lowered onto the board above
         yield from slide_in.slide_in(ctx, obj, comp)
         return
+    from pipeline.policies.scripted import lay_down  # builds on this module's `place_at`
+
+    if lay_down.too_tall(ctx, obj, target):  # it would stand too high in a shallow drawer
+        yield from lay_down.stand_and_tip(ctx, obj, target)
+        return
     xy, _, turn = _place_choice(ctx, obj, target)
     yield from place_at(ctx, obj, xy, support_ceiling(ctx.scene.env, target), turn)
 
