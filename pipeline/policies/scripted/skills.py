@@ -196,7 +196,7 @@ def _best_spot(s: Scene, obj: str, r: dict, half: np.ndarray, top: float, xy: np
         for fy in np.linspace(-1.0, 1.0, ny):
             p = r["pos"][:2] + half[:2] * [fx, fy]
             # overlap (m^2) of the footprint with objects already there: least wins
-            c = p if shift is None else p + shift  # (the object's own box: centred on the body, as before)
+            c = p if shift is None else p + shift  # the object's own box is taken centred on its body
             lo, hi = c - size / 2, c + size / 2
             crowd = sum(float(np.prod(np.clip(np.minimum(hi, b.hi[:2]) - np.maximum(lo, b.lo[:2]), 0, None)))
                         for b in others)
@@ -213,7 +213,9 @@ def _drawer_clearance(s: Scene, obj: str, joint: str, centre: np.ndarray, half: 
     footprint (a rounded box, 4 mm margin) lie over a wall or under an overhang (anything
     struck by a ray from above higher than 2 cm over the drawer floor). Heights are ray-cast
     once on a 5 mm grid. `size`/`shift`: a turned footprint (default: the object's box); with
-    them the grid also covers the shifted footprint and cells 1 cm off the region count."""
+    them the grid also covers the shifted footprint, its cells 1 cm off the region count, and
+    so do the cells under the hand's housing (`HOUSING_HALF`) off the region where something
+    stands higher than `HOUSING_Z` over the floor."""
     floor = s.support_top(centre, 0.01, {obj}, below=top)
     box = s.box(obj)
     edge = 0.5 * (box.size[:2] if size is None else size) + 0.004
@@ -224,8 +226,9 @@ def _drawer_clearance(s: Scene, obj: str, joint: str, centre: np.ndarray, half: 
     step = 0.005
     xs = np.arange(centre[0] - half[0] - margin[0], centre[0] + half[0] + margin[0] + step, step)
     ys = np.arange(centre[1] - half[1] - margin[1], centre[1] + half[1] + margin[1] + step, step)
-    hit = np.array([[(h := s.env.ray_down(np.array([x, y]), top + 0.5, floor, ignore=obj)) is not None
-                     and h > floor + 0.02 for y in ys] for x in xs])
+    heights = np.array([[np.nan if (h := s.env.ray_down(np.array([x, y]), top + 0.5, floor, ignore=obj)) is None
+                         else h for y in ys] for x in xs])
+    hit = heights > floor + 0.02  # (nan: nothing above the floor there)
     gx, gy = np.meshgrid(xs, ys, indexing="ij")
     # the drawer's own walls are thinner than the grid step: mark them from their boxes
     for b in s.env.joint_part_boxes(joint):
@@ -235,10 +238,8 @@ def _drawer_clearance(s: Scene, obj: str, joint: str, centre: np.ndarray, half: 
     if turned:
         # the housing over a long object held across its middle (its short side: the closing axis)
         housing = HOUSING_HALF if size[0] > size[1] else HOUSING_HALF[::-1]
-        high = np.array([[(h := s.env.ray_down(np.array([x, y]), top + 0.5, floor, ignore=obj)) is not None
-                          and h > floor + HOUSING_Z for y in ys] for x in xs])
+        high = (heights > floor + HOUSING_Z) & ((np.abs(gx - centre[0]) > half[0]) | (np.abs(gy - centre[1]) > half[1]))
         # off the drawer: over the table or the cabinet, not in it
-        high &= (np.abs(gx - centre[0]) > half[0]) | (np.abs(gy - centre[1]) > half[1])
         hit |= (np.abs(gx - centre[0]) > half[0] + 0.01) | (np.abs(gy - centre[1]) > half[1] + 0.01)
 
     def blocked(p: np.ndarray) -> int:
