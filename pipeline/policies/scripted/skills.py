@@ -242,9 +242,23 @@ def place(ctx: Ctx, obj: str, target: str) -> Plan:
     yield from place_at(ctx, obj, place_xy(ctx, obj, target), support_ceiling(ctx.scene.env, target))
 
 
-def place_at(ctx: Ctx, obj: str, xy: np.ndarray, below: float = np.inf) -> Plan:
+def sweep_clearance(s: Scene, a: np.ndarray, b: np.ndarray, corridor_m: float, exclude: set[str]) -> float:
+    """Highest top the hand (`corridor_m` either side) passes over between xy `a` and `b`,
+    away from both ends: there it rises and comes down vertically, beside what stands there
+    already, so only what lies in between needs lifting over."""
+    d = np.asarray(b, dtype=float)[:2] - np.asarray(a, dtype=float)[:2]
+    n = float(np.linalg.norm(d))
+    if n <= 2 * corridor_m:
+        return s.table_height()
+    u = d / n * corridor_m
+    return s.path_clearance(np.asarray(a[:2]) + u, np.asarray(b[:2]) - u, corridor_m, exclude)
+
+
+def place_at(ctx: Ctx, obj: str, xy: np.ndarray, below: float = np.inf, corridor_m: float = 0.0) -> Plan:
     """Carry the held object so its body comes down at `xy` on whatever supports it there
-    (ignoring boxes whose top is at or above `below`), release, retreat."""
+    (ignoring boxes whose top is at or above `below`), release, retreat. `corridor_m`: half
+    width of the path kept clear below the carried object, if wider than the object's own
+    (the recovery expert's put-aside keeps the whole hand clear: 0 keeps the plain path)."""
     s = ctx.scene
     env = s.env
     eef = s.eef()
@@ -260,7 +274,10 @@ def place_at(ctx: Ctx, obj: str, xy: np.ndarray, below: float = np.inf) -> Plan:
     offset_z = abs(ctx.noise.place_offset()[2])
     ctx.note(place_offset=[offset_xy[0], offset_xy[1], offset_z])
     release_z = support + 0.015 + bottom + offset_z
-    lift_z = s.path_clearance(box.centre, foot, radius, {obj}) + CARRY_CLEARANCE + bottom
+    clear = s.path_clearance(box.centre, foot, radius, {obj})
+    if corridor_m > radius:
+        clear = max(clear, sweep_clearance(s, box.centre, foot, corridor_m, {obj}))
+    lift_z = clear + CARRY_CLEARANCE + bottom
     goal = np.array([dest[0] + hold[0], dest[1] + hold[1], release_z])
     yaw = ctx.yaw_hold
     yield from travel(ctx, goal, yaw, 1.0, max(lift_z, release_z + 0.05))

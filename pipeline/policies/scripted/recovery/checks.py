@@ -7,6 +7,7 @@ import numpy as np
 
 from pipeline.policies.scripted.recovery.reasons import GiveUpReason
 from pipeline.policies.scripted.scene import Scene
+from pipeline.policies.scripted.skills import sweep_clearance
 
 OFF_TABLE_M = 0.06  # a body this far below the table top has fallen off it
 REACH_M = 0.95  # horizontal reach from the robot base the arm can still grasp at
@@ -23,6 +24,7 @@ SAFE_Z = 0.16  # grip site above the table top from which any approach may start
 # comfortable region of the grip site (x, y), relative to the robot base
 HOME_XY = np.array([0.45, 0.0])
 COMFORT_XY = np.array([[0.15, -0.45], [0.95, 0.45]])
+LIFT_COST = 1.0  # metres of travel one metre of lift over obstacles is worth, choosing a free spot
 
 
 def robot_base(scene: Scene) -> np.ndarray:
@@ -198,9 +200,13 @@ def under_sweep(scene: Scene, obj: str, sweep: np.ndarray, margin: float = 0.05)
     return _overlap(np.array([b.lo, b.hi]), sweep, pad=margin) and b.hi[2] < sweep[1, 2]
 
 
-def free_spot(scene: Scene, obj: str, avoid: list[np.ndarray], forbid: list[np.ndarray] = ()) -> np.ndarray | None:
+def free_spot(scene: Scene, obj: str, avoid: list[np.ndarray], forbid: list[np.ndarray] = (),
+              corridor_m: float = 0.0) -> np.ndarray | None:
     """A table spot (xy) where `obj` can stand without touching anything, near the hand,
-    away from the points in `avoid` (goal targets), inside the comfortable region."""
+    away from the points in `avoid` (goal targets), inside the comfortable region, and
+    preferably reached without lifting the hand (a corridor of `corridor_m` either side)
+    over tall things: every metre of lift costs LIFT_COST metres of travel (a carry over a
+    drawer front or a cabinet rises and comes down again, ~50 steps)."""
     box = scene.box(obj)
     r = float(np.linalg.norm(box.size[:2])) / 2 + 0.03
     table = scene.table_height()
@@ -216,6 +222,9 @@ def free_spot(scene: Scene, obj: str, avoid: list[np.ndarray], forbid: list[np.n
             if any(_overlap(b, sq) for b in boxes) or any(_overlap(f, sq, pad=0.05) for f in forbid):
                 continue
             cost = float(np.linalg.norm(xy - eef)) + float(np.linalg.norm(xy - home))
+            if corridor_m > 0:
+                over = sweep_clearance(scene, box.centre, xy, corridor_m, {obj}) - table
+                cost += LIFT_COST * over
             cost += sum(max(0.0, 0.2 - float(np.linalg.norm(xy - a[:2]))) * 5 for a in avoid)
             if best is None or cost < best[0]:
                 best = (cost, xy)
