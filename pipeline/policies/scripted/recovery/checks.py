@@ -20,6 +20,7 @@ JOINT_MARGIN = 0.15  # radians from a joint limit that count as an awkward pose
 # controller can no longer pull the hand back (measured: stuck 80 steps, 20 cm short of home)
 ELBOW_STRAIGHT = 0.4
 ELBOW_LOCKED = 0.06  # ... and this close it is locked: only tilting the hand bends it again
+PALM_HALF_M = 0.03  # the palm's half width across its closing axis (its box: 3.2 cm)
 SAFE_Z = 0.16  # grip site above the table top from which any approach may start
 # comfortable region of the grip site (x, y), relative to the robot base
 HOME_XY = np.array([0.45, 0.0])
@@ -143,15 +144,17 @@ def blockers(scene: Scene, obj: str, dest: np.ndarray, keep: set[str]) -> list[s
     return out
 
 
-def grasp_blockers(scene: Scene, obj: str, grasp, keep: set[str]) -> list[str]:
+def grasp_blockers(scene: Scene, obj: str, grasp, keep: set[str], half_width: float = PALM_HALF_M) -> list[str]:
     """Movable objects standing where the palm's ends go down when grasping `obj` with
     `grasp` (the palm reaches ~10 cm either way along the closing axis, ~5 cm above the
-    grip site): the best grasp of a flat box next to a tall carton is such a case."""
+    grip site; `half_width` across it, 0: its middle line only): the best grasp of a flat
+    box next to a tall carton is such a case."""
     from pipeline.policies.scripted.grasps import closing_axis
 
     ax = closing_axis(grasp.yaw)
     side = np.array([-ax[1], ax[0], 0.0])
-    points = [grasp.pos + sg * ax * r + t * side * 0.03 for sg in (-1, 1) for r in (0.05, 0.1) for t in (-1, 1)]
+    points = [grasp.pos + sg * ax * r + t * side * half_width
+              for sg in (-1, 1) for r in (0.05, 0.1) for t in ((-1, 1) if half_width > 0 else (0,))]
     out = []
     for o in scene.env.object_names:
         if o == obj or o in keep:
