@@ -139,3 +139,56 @@ def test_the_white_cabinets_low_bottom_drawer_is_pushed_shut():
         start(env)
         result, policy = finish(env, task, horizon=150)
         assert result.success
+
+
+def test_only_what_stands_under_the_palms_middle_blocks_a_flat_objects_first_grasp(bowl_on_plate):
+    # a tall bottle the palm's edge would brush is nudged by the descent (the plain grasp
+    # succeeds); moving it first cost ~200 steps and toppled it. After a failed grasp the
+    # palm's full width counts.
+    from pipeline.policies.scripted.grasps import closing_axis, plan_grasp
+
+    task, env = bowl_on_plate
+    start(env)
+    s = Scene(env)
+    g = plan_grasp(s, "cream_cheese_1")
+    ax = closing_axis(g.yaw)
+    side = np.array([-ax[1], ax[0], 0.0])
+    half = float(np.max(s.box("wine_bottle_1").size[:2])) / 2
+    # the bottle's near side 1 cm inside the palm's edge, 6 cm out along the closing axis
+    spot = g.pos + ax * 0.06 + side * (checks.PALM_HALF_M + half - 0.01)
+    set_pose(env, "wine_bottle_1", [spot[0], spot[1], env.object_pose("wine_bottle_1")[0][2] + 0.005])
+    keep = {"akita_black_bowl_1", "plate_1"}
+    assert "wine_bottle_1" in checks.grasp_blockers(s, "cream_cheese_1", g, keep)
+    assert "wine_bottle_1" not in checks.grasp_blockers(s, "cream_cheese_1", g, keep, half_width=0.0)
+
+
+def test_a_goal_object_before_a_part_open_drawer_is_set_aside_without_lifting_over_the_drawer():
+    # the pudding lies just in front of a drawer 83% out (not open by LIBERO's predicate):
+    # it must go aside before the drawer is pulled the rest of the way. A spot across the
+    # drawer's front made the carry sweep the drawer shut (and cost ~50 steps of lifting).
+    from pipeline.policies.scripted.noise import Noise, episode_rng
+    from pipeline.config import ScriptedNoise
+    from pipeline.policies.scripted.recovery.put_aside import HAND_REACH_M, goal_points
+    from pipeline.policies.scripted.skills import Ctx, sweep_clearance
+
+    task = tasks(["libero_90"])[5]  # put the chocolate pudding in the top drawer of the cabinet and close it
+    with build_env(task) as env:
+        start(env)
+        joint, obj = "wooden_cabinet_1_top_level", "chocolate_pudding_1"
+        set_joint(env, joint, -0.133)
+        assert not env.object_state("wooden_cabinet_1_top_region").is_open()
+        s = Scene(env)
+        sweep = checks.drawer_sweep(s, joint)
+        fr = env.joint_frame(joint)
+        out = fr["axis"] * np.sign(fr["range"][np.argmax(np.abs(fr["range"]))])  # the opening direction
+        k = int(np.argmax(np.abs(out[:2])))
+        front = sweep[1, k] if out[k] > 0 else sweep[0, k]
+        p = env.object_pose(obj)[0].copy()
+        p[k] = front + out[k] * (0.034 + s.box(obj).size[k] / 2)
+        p[1 - k] = 0.5 * (sweep[0, 1 - k] + sweep[1, 1 - k])
+        set_pose(env, obj, p)
+        assert checks.under_sweep(s, obj, sweep)
+        ctx = Ctx(scene=s, noise=Noise(ScriptedNoise(), episode_rng(0, task.task_id)))
+        spot = checks.free_spot(s, obj, goal_points(ctx, obj), [sweep], corridor_m=HAND_REACH_M)
+        assert spot is not None
+        assert sweep_clearance(s, s.box(obj).centre, spot, HAND_REACH_M, {obj}) < sweep[0, 2]
