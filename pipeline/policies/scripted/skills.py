@@ -78,11 +78,12 @@ def free_hand(ctx: Ctx) -> Plan:
         yield ctx.move(eef + [0, 0, 0.06], tol=0.02, label="back_off")
 
 
-def grasp(ctx: Ctx, obj: str, dest: np.ndarray | None = None, choice: int = 0, hover_m: float = 0.08) -> Plan:
-    """Reach above the object, descend, close, lift. `choice` / `hover_m`: another grasp
-    candidate and a higher hover (the recovery expert's retries)."""
+def grasp(ctx: Ctx, obj: str, dest: np.ndarray | None = None, choice: int = 0, hover_m: float = 0.08,
+          top_hold: bool = False) -> Plan:
+    """Reach above the object, descend, close, lift. `choice` / `hover_m` / `top_hold`:
+    another grasp candidate, a higher hover, a hold near the top (the recovery expert's)."""
     s = ctx.scene
-    g = plan_grasp(s, obj, dest, choice)
+    g = plan_grasp(s, obj, dest, choice, top_hold)
     offset = ctx.noise.grasp_offset()
     ctx.note(grasp_offset=offset)
     pos = g.pos + offset
