@@ -258,8 +258,9 @@ def sweep_clearance(s: Scene, a: np.ndarray, b: np.ndarray, corridor_m: float, e
 def place_at(ctx: Ctx, obj: str, xy: np.ndarray, below: float = np.inf, corridor_m: float = 0.0) -> Plan:
     """Carry the held object so its body comes down at `xy` on whatever supports it there
     (ignoring boxes whose top is at or above `below`), release, retreat. `corridor_m`: half
-    width of the path kept clear below the carried object, if wider than the object's own
-    (the recovery expert's put-aside keeps the whole hand clear: 0 keeps the plain path)."""
+    width of the path kept clear below the carried object between its ends (`sweep_clearance`),
+    if wider than the object's own (the recovery expert's put-aside keeps the whole hand
+    clear; 0 keeps the plain path)."""
     s = ctx.scene
     env = s.env
     eef = s.eef()
