@@ -166,8 +166,8 @@ def test_a_goal_object_before_a_part_open_drawer_is_set_aside_without_lifting_ov
     # the pudding lies just in front of a drawer 83% out (not open by LIBERO's predicate):
     # it must go aside before the drawer is pulled the rest of the way. A spot across the
     # drawer's front made the carry sweep the drawer shut (and cost ~50 steps of lifting).
-    from pipeline.policies.scripted.noise import Noise, episode_rng
     from pipeline.config import ScriptedNoise
+    from pipeline.policies.scripted.noise import Noise, episode_rng
     from pipeline.policies.scripted.recovery.put_aside import HAND_REACH_M, goal_points
     from pipeline.policies.scripted.skills import Ctx, sweep_clearance
 
