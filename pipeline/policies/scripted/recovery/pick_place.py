@@ -11,6 +11,8 @@ from pipeline.policies.scripted.recovery import checks
 from pipeline.policies.scripted.stack import carried
 from pipeline.policies.scripted.skills import Ctx, Plan, destination, free_hand, grasp, place
 
+TURN_TOL = 0.15  # radians of yaw still to turn at which the hand may go down to grasp
+
 
 def pick_place_once(ctx: Ctx, conjunct: tuple[str, ...], attempt: int) -> Plan:
     _, obj, target = conjunct
@@ -19,13 +21,13 @@ def pick_place_once(ctx: Ctx, conjunct: tuple[str, ...], attempt: int) -> Plan:
     if not carried(s, obj, checks.held(s)):
         yield from free_hand(ctx)
         yield from grasp(ctx, obj, destination(ctx, obj, target), choice=attempt,
-                         hover_m=0.08 + 0.03 * min(attempt, 2))
+                         hover_m=0.08 + 0.03 * min(attempt, 2), turn_tol=TURN_TOL)
         if not carried(s, obj, checks.held(s)):
             ctx.events.append(f"missed_grasp:{obj}")
             if ctx.truth is not None:
                 ctx.truth.end_hand(obj, False)
             return
-    yield from place(ctx, obj, target)
+    yield from place(ctx, obj, target, stand=True)
     if ctx.truth is not None:
         ctx.truth.end_hand(obj, s.satisfied(conjunct))
     if not s.satisfied(conjunct) and not carried(s, obj, checks.held(s)):
