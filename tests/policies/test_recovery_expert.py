@@ -13,7 +13,7 @@ from pipeline.policies.scripted.recovery.variation import variation_levels
 from pipeline.policies.scripted.scene import Scene
 from pipeline.rollout import run_episode
 from pipeline.sim import build_env, tasks
-from tests.policies.failure_states import grasp_wrong, lying, set_joint, set_pose, start
+from tests.policies.failure_states import drive, grasp_wrong, lying, set_joint, set_pose, start
 
 pytestmark = [pytest.mark.sim, pytest.mark.xdist_group("recovery_expert")]
 
@@ -179,3 +179,77 @@ def test_a_bowl_under_the_open_top_drawer_is_got_out_and_put_in():
         # (pushed in past 6 cm, the drawer is opened again by its handle: ~530 steps here)
         result, policy = finish(env, task, horizon=650)
         assert result.success, policy.give_up_detail
+
+
+def test_only_what_stands_under_the_palms_middle_blocks_a_flat_objects_first_grasp(bowl_on_plate):
+    # a tall bottle the palm's edge would brush is nudged by the descent (the plain grasp
+    # succeeds); moving it first cost ~200 steps and toppled it. After a failed grasp the
+    # palm's full width counts.
+    from pipeline.policies.scripted.grasps import closing_axis, plan_grasp
+
+    task, env = bowl_on_plate
+    start(env)
+    s = Scene(env)
+    g = plan_grasp(s, "cream_cheese_1")
+    ax = closing_axis(g.yaw)
+    side = np.array([-ax[1], ax[0], 0.0])
+    half = float(np.max(s.box("wine_bottle_1").size[:2])) / 2
+    # the bottle's near side 1 cm inside the palm's edge, 6 cm out along the closing axis
+    spot = g.pos + ax * 0.06 + side * (checks.PALM_HALF_M + half - 0.01)
+    set_pose(env, "wine_bottle_1", [spot[0], spot[1], env.object_pose("wine_bottle_1")[0][2] + 0.005])
+    keep = {"akita_black_bowl_1", "plate_1"}
+    assert "wine_bottle_1" in checks.grasp_blockers(s, "cream_cheese_1", g, keep)
+    assert "wine_bottle_1" not in checks.grasp_blockers(s, "cream_cheese_1", g, keep, half_width=0.0)
+
+
+def test_a_goal_object_before_a_part_open_drawer_is_set_aside_without_lifting_over_the_drawer():
+    # the pudding lies just in front of a drawer 83% out (not open by LIBERO's predicate):
+    # it must go aside before the drawer is pulled the rest of the way. A spot across the
+    # drawer's front made the carry sweep the drawer shut (and cost ~50 steps of lifting).
+    from pipeline.config import ScriptedNoise
+    from pipeline.policies.scripted.noise import Noise, episode_rng
+    from pipeline.policies.scripted.recovery.put_aside import HAND_REACH_M, goal_points
+    from pipeline.policies.scripted.skills import Ctx, sweep_clearance
+
+    task = tasks(["libero_90"])[5]  # put the chocolate pudding in the top drawer of the cabinet and close it
+    with build_env(task) as env:
+        start(env)
+        joint, obj = "wooden_cabinet_1_top_level", "chocolate_pudding_1"
+        set_joint(env, joint, -0.133)
+        assert not env.object_state("wooden_cabinet_1_top_region").is_open()
+        s = Scene(env)
+        sweep = checks.drawer_sweep(s, joint)
+        fr = env.joint_frame(joint)
+        out = fr["axis"] * np.sign(fr["range"][np.argmax(np.abs(fr["range"]))])  # the opening direction
+        k = int(np.argmax(np.abs(out[:2])))
+        front = sweep[1, k] if out[k] > 0 else sweep[0, k]
+        p = env.object_pose(obj)[0].copy()
+        p[k] = front + out[k] * (0.034 + s.box(obj).size[k] / 2)
+        p[1 - k] = 0.5 * (sweep[0, 1 - k] + sweep[1, 1 - k])
+        set_pose(env, obj, p)
+        assert checks.under_sweep(s, obj, sweep)
+        ctx = Ctx(scene=s, noise=Noise(ScriptedNoise(), episode_rng(0, task.task_id)))
+        spot = checks.free_spot(s, obj, goal_points(ctx, obj), [sweep], corridor_m=HAND_REACH_M)
+        assert spot is not None
+        assert sweep_clearance(s, s.box(obj).centre, spot, HAND_REACH_M, {obj}) < sweep[0, 2]
+
+
+def test_a_tall_obstruction_is_set_aside_standing(bowl_on_plate):
+    # held near its top: grasped at mid-height the palm pressed down on the top and the
+    # bottle (a milk carton in a release scene) came down toppled
+    from pipeline.config import ScriptedNoise
+    from pipeline.policies.scripted.noise import Noise
+    from pipeline.policies.scripted.recovery.put_aside import put_aside
+    from pipeline.policies.scripted.skills import Ctx
+
+    task, env = bowl_on_plate
+    start(env)
+    s = Scene(env)
+    obj = "wine_bottle_1"
+    start_xy, tall = env.object_pose(obj)[0][:2].copy(), s.box(obj).size[2]
+    ctx = Ctx(scene=s, noise=Noise(ScriptedNoise(), np.random.default_rng(0)))
+    drive(env, ctx, put_aside(ctx, obj), max_steps=200)
+    env.settle(10)
+    assert checks.held(s) is None
+    assert np.linalg.norm(env.object_pose(obj)[0][:2] - start_xy) > 0.03
+    assert s.box(obj).size[2] > 0.9 * tall  # standing

@@ -83,14 +83,15 @@ def free_hand(ctx: Ctx) -> Plan:
 
 
 def grasp(ctx: Ctx, obj: str, dest: np.ndarray | None = None, choice: int = 0, hover_m: float = 0.08,
-          turn_tol: float | None = None) -> Plan:
+          turn_tol: float | None = None, top_hold: bool = False) -> Plan:
     """Reach above the object, descend, close, lift. `choice` / `hover_m`: another grasp
     candidate and a higher hover (the recovery expert's retries). `turn_tol` (radians): the
     hover also waits until the hand has turned to the grasp's yaw, so a hand still turning
     does not sweep its fingers into the object on the way down (the recovery expert; a
-    plain expert's start leaves little to turn)."""
+    plain expert's start leaves little to turn). `top_hold`: held near its top (the
+    recovery expert's put-aside, `plan_grasp`)."""
     s = ctx.scene
-    g = plan_grasp(s, obj, dest, choice)
+    g = plan_grasp(s, obj, dest, choice, top_hold)
     offset = ctx.noise.grasp_offset()
     ctx.note(grasp_offset=offset)
     pos = g.pos + offset
@@ -330,6 +331,18 @@ def place(ctx: Ctx, obj: str, target: str, stand: bool = False) -> Plan:
     yield from place_at(ctx, obj, xy, support_ceiling(ctx.scene.env, target), stand=stand, turn=turn)
 
 
+def sweep_clearance(s: Scene, a: np.ndarray, b: np.ndarray, corridor_m: float, exclude: set[str]) -> float:
+    """Highest top the hand (`corridor_m` either side) passes over between xy `a` and `b`,
+    away from both ends: there it rises and comes down vertically, beside what stands there
+    already, so only what lies in between needs lifting over."""
+    d = np.asarray(b, dtype=float)[:2] - np.asarray(a, dtype=float)[:2]
+    n = float(np.linalg.norm(d))
+    if n <= 2 * corridor_m:
+        return s.table_height()
+    u = d / n * corridor_m
+    return s.path_clearance(np.asarray(a[:2]) + u, np.asarray(b[:2]) - u, corridor_m, exclude)
+
+
 def upright_hold(s: Scene, obj: str) -> tuple[np.ndarray, float] | None:
     """For an upright-standing object that tilted in the hand (a moka pot held by its
     handle swings about the fingers' axis): the grip site relative to the body, and its
@@ -348,13 +361,16 @@ def upright_hold(s: Scene, obj: str) -> tuple[np.ndarray, float] | None:
 
 
 def place_at(ctx: Ctx, obj: str, xy: np.ndarray, below: float = np.inf, stand: bool = False,
-             turn: float = 0.0) -> Plan:
+             turn: float = 0.0, corridor_m: float = 0.0) -> Plan:
     """Carry the held object so its body comes down at `xy` on whatever supports it there
     (ignoring boxes whose top is at or above `below`), release, retreat. `stand`: an
     upright object that tilted in the hand is lowered as if it stood upright, so its low
     edge meets the support first and the pressing turns it upright in the fingers before
     they open (released tilted, a pot falls over). `turn` (rad): the hand turns the object
-    about the vertical on the way (a long object along a drawer)."""
+    about the vertical on the way (a long object along a drawer). `corridor_m`: half width
+    of the path kept clear below the carried object between its ends (`sweep_clearance`),
+    if wider than the object's own (the recovery expert's put-aside keeps the whole hand
+    clear; 0 keeps the plain path)."""
     s = ctx.scene
     env = s.env
     eef = s.eef()
@@ -378,7 +394,10 @@ def place_at(ctx: Ctx, obj: str, xy: np.ndarray, below: float = np.inf, stand: b
     offset_z = abs(ctx.noise.place_offset()[2])
     ctx.note(place_offset=[offset_xy[0], offset_xy[1], offset_z])
     release_z = support + gap + bottom + offset_z
-    lift_z = s.path_clearance(box.centre, foot, radius, {obj}) + CARRY_CLEARANCE + max(bottom, carry_bottom)
+    clear = s.path_clearance(box.centre, foot, radius, {obj})
+    if corridor_m > radius:
+        clear = max(clear, sweep_clearance(s, box.centre, foot, corridor_m, {obj}))
+    lift_z = clear + CARRY_CLEARANCE + max(bottom, carry_bottom)
     goal = np.array([dest[0] + hold[0], dest[1] + hold[1], release_z])
     yaw = ctx.yaw_hold + turn
     yield from travel(ctx, goal, yaw, 1.0, max(lift_z, release_z + 0.05))

@@ -7,6 +7,7 @@ import numpy as np
 
 from pipeline.policies.scripted.recovery.reasons import GiveUpReason
 from pipeline.policies.scripted.scene import Scene
+from pipeline.policies.scripted.skills import sweep_clearance
 
 OFF_TABLE_M = 0.06  # a body this far below the table top has fallen off it
 REACH_M = 0.95  # horizontal reach from the robot base the arm can still grasp at
@@ -19,10 +20,12 @@ JOINT_MARGIN = 0.15  # radians from a joint limit that count as an awkward pose
 # controller can no longer pull the hand back (measured: stuck 80 steps, 20 cm short of home)
 ELBOW_STRAIGHT = 0.4
 ELBOW_LOCKED = 0.06  # ... and this close it is locked: only tilting the hand bends it again
+PALM_HALF_M = 0.03  # the palm's half width across its closing axis (its box: 3.2 cm)
 SAFE_Z = 0.16  # grip site above the table top from which any approach may start
 # comfortable region of the grip site (x, y), relative to the robot base
 HOME_XY = np.array([0.45, 0.0])
 COMFORT_XY = np.array([[0.15, -0.45], [0.95, 0.45]])
+LIFT_COST = 1.0  # metres of travel one metre of lift over obstacles is worth, choosing a free spot
 
 
 def robot_base(scene: Scene) -> np.ndarray:
@@ -141,15 +144,17 @@ def blockers(scene: Scene, obj: str, dest: np.ndarray, keep: set[str]) -> list[s
     return out
 
 
-def grasp_blockers(scene: Scene, obj: str, grasp, keep: set[str]) -> list[str]:
+def grasp_blockers(scene: Scene, obj: str, grasp, keep: set[str], half_width: float = PALM_HALF_M) -> list[str]:
     """Movable objects standing where the palm's ends go down when grasping `obj` with
     `grasp` (the palm reaches ~10 cm either way along the closing axis, ~5 cm above the
-    grip site): the best grasp of a flat box next to a tall carton is such a case."""
+    grip site; `half_width` across it, 0: its middle line only): the best grasp of a flat
+    box next to a tall carton is such a case."""
     from pipeline.policies.scripted.grasps import closing_axis
 
     ax = closing_axis(grasp.yaw)
     side = np.array([-ax[1], ax[0], 0.0])
-    points = [grasp.pos + sg * ax * r + t * side * 0.03 for sg in (-1, 1) for r in (0.05, 0.1) for t in (-1, 1)]
+    points = [grasp.pos + sg * ax * r + t * side * half_width
+              for sg in (-1, 1) for r in (0.05, 0.1) for t in ((-1, 1) if half_width > 0 else (0,))]
     out = []
     for o in scene.env.object_names:
         if o == obj or o in keep:
@@ -221,9 +226,13 @@ def under_sweep(scene: Scene, obj: str, sweep: np.ndarray, margin: float = 0.05)
     return _overlap(np.array([b.lo, b.hi]), sweep, pad=margin) and b.hi[2] < sweep[1, 2]
 
 
-def free_spot(scene: Scene, obj: str, avoid: list[np.ndarray], forbid: list[np.ndarray] = ()) -> np.ndarray | None:
+def free_spot(scene: Scene, obj: str, avoid: list[np.ndarray], forbid: list[np.ndarray] = (),
+              corridor_m: float = 0.0) -> np.ndarray | None:
     """A table spot (xy) where `obj` can stand without touching anything, near the hand,
-    away from the points in `avoid` (goal targets), inside the comfortable region."""
+    away from the points in `avoid` (goal targets), inside the comfortable region, and
+    preferably reached without lifting the hand (a corridor of `corridor_m` either side)
+    over tall things: every metre of lift costs LIFT_COST metres of travel (a carry over a
+    drawer front or a cabinet rises and comes down again, ~50 steps)."""
     box = scene.box(obj)
     r = float(np.linalg.norm(box.size[:2])) / 2 + 0.03
     table = scene.table_height()
@@ -239,6 +248,9 @@ def free_spot(scene: Scene, obj: str, avoid: list[np.ndarray], forbid: list[np.n
             if any(_overlap(b, sq) for b in boxes) or any(_overlap(f, sq, pad=0.05) for f in forbid):
                 continue
             cost = float(np.linalg.norm(xy - eef)) + float(np.linalg.norm(xy - home))
+            if corridor_m > 0:
+                over = sweep_clearance(scene, box.centre, xy, corridor_m, {obj}) - table
+                cost += LIFT_COST * over
             cost += sum(max(0.0, 0.2 - float(np.linalg.norm(xy - a[:2]))) * 5 for a in avoid)
             if best is None or cost < best[0]:
                 best = (cost, xy)

@@ -9,13 +9,21 @@ from pipeline.policies.scripted.recovery import checks
 from pipeline.policies.scripted.recovery.reasons import GiveUp, GiveUpReason
 from pipeline.policies.scripted.skills import Ctx, Plan, free_hand, grasp, place_at
 
+# the palm reaches ~10 cm either way along its closing axis: carrying an object aside, the
+# whole hand keeps above what it passes (measured: a pudding carried aside past a part-open
+# drawer at the object's own width swept the drawer shut, and opening it again cost ~170 steps)
+HAND_REACH_M = 0.1
 
-def goal_points(ctx: Ctx) -> list[np.ndarray]:
-    """Where the goal's objects and targets are: a set-aside object must keep clear of them."""
+
+def goal_points(ctx: Ctx, moved: str | None = None) -> list[np.ndarray]:
+    """Where the goal's objects and targets are: a set-aside object must keep clear of them
+    (not of where it stands itself, `moved`: a goal object put aside before its drawer opens)."""
     s = ctx.scene
     pts = []
     for c in s.env.goal:
         for name in c[1:]:
+            if name == moved:
+                continue
             try:
                 pts.append(s.pos(name))
             except KeyError:
@@ -28,10 +36,10 @@ def put_aside(ctx: Ctx, obj: str, attempt: int = 0, forbid: list[np.ndarray] = (
     s = ctx.scene
     if checks.held(s) != obj:
         yield from free_hand(ctx)
-        yield from grasp(ctx, obj, None, choice=attempt, hover_m=0.08 + 0.03 * min(attempt, 2))
+        yield from grasp(ctx, obj, None, choice=attempt, hover_m=0.08 + 0.03 * min(attempt, 2), top_hold=True)
         if checks.held(s) != obj:
             return
-    spot = checks.free_spot(s, obj, goal_points(ctx), forbid)
+    spot = checks.free_spot(s, obj, goal_points(ctx, obj), forbid, corridor_m=HAND_REACH_M)
     if spot is None:
         raise GiveUp(GiveUpReason.NO_PLAN, f"no free spot on the table to put {obj} aside")
-    yield from place_at(ctx, obj, spot)
+    yield from place_at(ctx, obj, spot, corridor_m=HAND_REACH_M)
