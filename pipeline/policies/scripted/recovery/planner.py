@@ -113,7 +113,13 @@ def recover(ctx: Ctx, now: Callable[[], int], budget: int | None) -> Plan:
                 and articulated.is_closed_enough(s.env, sub[1])):  # (an open one only goes a little further)
             # an object the opened drawer would overhang cannot be grasped afterwards: first aside
             sweep = checks.drawer_sweep(s, joint)
-            under = [m for m in movers if sweep is not None and checks.under_sweep(s, m, sweep) and aside[m] < MAX_ASIDE]
+            # ... and any other loose object the drawer front (or the hand at its handle) would
+            # run into: it jams the drawer and the hand pushes it about (a bowl on the table
+            # in front of a bottom drawer); objects riding in the drawer itself go with it
+            loose = [o for o in s.env.object_names if o not in keep and o not in movers
+                     and not checks.in_part(s, o, joint)]
+            under = [m for m in movers + loose
+                     if sweep is not None and checks.under_sweep(s, m, sweep) and aside[m] < MAX_ASIDE]
             if under:
                 _debug("aside before opening", under)
                 aside[under[0]] += 1
