@@ -78,11 +78,13 @@ def free_hand(ctx: Ctx) -> Plan:
         yield ctx.move(eef + [0, 0, 0.06], tol=0.02, label="back_off")
 
 
-def grasp(ctx: Ctx, obj: str, dest: np.ndarray | None = None, choice: int = 0, hover_m: float = 0.08) -> Plan:
+def grasp(ctx: Ctx, obj: str, dest: np.ndarray | None = None, choice: int = 0, hover_m: float = 0.08,
+          g=None) -> Plan:
     """Reach above the object, descend, close, lift. `choice` / `hover_m`: another grasp
-    candidate and a higher hover (the recovery expert's retries)."""
+    candidate and a higher hover (the recovery expert's retries); `g`: a `Grasp` chosen by
+    the caller instead (the recovery expert's, see recovery/long_grasp.py)."""
     s = ctx.scene
-    g = plan_grasp(s, obj, dest, choice)
+    g = g if g is not None else plan_grasp(s, obj, dest, choice)
     offset = ctx.noise.grasp_offset()
     ctx.note(grasp_offset=offset)
     pos = g.pos + offset

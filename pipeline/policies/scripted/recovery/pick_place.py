@@ -7,7 +7,9 @@ retry shift of `variation.RetryNoise`. The planner calls it again from the live 
 
 from __future__ import annotations
 
+from pipeline.policies.scripted.grasps import plan_grasp
 from pipeline.policies.scripted.recovery import checks
+from pipeline.policies.scripted.recovery.long_grasp import slide_clear
 from pipeline.policies.scripted.stack import carried
 from pipeline.policies.scripted.skills import Ctx, Plan, destination, free_hand, grasp, place
 
@@ -18,7 +20,10 @@ def pick_place_once(ctx: Ctx, conjunct: tuple[str, ...], attempt: int) -> Plan:
     ctx.begin("pick_place", conjunct, obj, target)
     if not carried(s, obj, checks.held(s)):
         yield from free_hand(ctx)
-        yield from grasp(ctx, obj, destination(ctx, obj, target), choice=attempt,
+        dest = destination(ctx, obj, target)
+        # a candidate whose fingers land clear of other objects (they would be clamped too)
+        choice = checks.clear_grasp_choice(s, obj, dest, attempt)
+        yield from grasp(ctx, obj, dest, choice=choice, g=slide_clear(s, obj, plan_grasp(s, obj, dest, choice)),
                          hover_m=0.08 + 0.03 * min(attempt, 2))
         if not carried(s, obj, checks.held(s)):
             ctx.events.append(f"missed_grasp:{obj}")

@@ -102,6 +102,10 @@ def recover(ctx: Ctx, now: Callable[[], int], budget: int | None) -> Plan:
             # a flat object (the palm then comes down low, beside its neighbours)
             if tries[sub] > 0 or s.box(sub[1]).size[2] < FLAT_M:
                 in_way += checks.grasp_blockers(s, sub[1], plan_grasp(s, sub[1], dest, tries[sub]), keep)
+            # whatever an open fingertip would land on: the hand closes on it too
+            # (another grasp candidate first, see pick_place_once; aside if none is clear)
+            k = checks.clear_grasp_choice(s, sub[1], dest, tries[sub])
+            in_way += checks.tip_blockers(s, sub[1], plan_grasp(s, sub[1], dest, k), keep)
             block = [b for b in in_way if aside[b] < MAX_ASIDE]
             if block:
                 _debug("aside", block)
