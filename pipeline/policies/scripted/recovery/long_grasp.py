@@ -48,3 +48,11 @@ def slide_clear(scene: Scene, obj: str, g: Grasp) -> Grasp:
         if best[0] <= BLOCKED_M:
             break
     return best[1]
+
+
+def lying_long(scene: Scene, obj: str) -> bool:
+    """A long object lying on its side (a toppled bottle): longer than LONG_M and less
+    than half as tall as long."""
+    corners = scene.env.object_corners(obj)[:, :2]
+    widths = [float(np.ptp(corners @ [np.cos(t), np.sin(t)])) for t in np.linspace(0, np.pi, 36, endpoint=False)]
+    return max(widths) > LONG_M and scene.box(obj).size[2] < 0.5 * max(widths)

@@ -9,9 +9,10 @@ from __future__ import annotations
 
 from pipeline.policies.scripted.grasps import plan_grasp
 from pipeline.policies.scripted.recovery import checks
-from pipeline.policies.scripted.recovery.long_grasp import slide_clear
+from pipeline.policies.scripted.recovery.long_grasp import lying_long, slide_clear
 from pipeline.policies.scripted.stack import carried
-from pipeline.policies.scripted.skills import Ctx, Plan, destination, free_hand, grasp, place
+from pipeline.policies.scripted.skills import (Ctx, Plan, box_centre_offset, destination, free_hand, grasp, place,
+                                              place_at, place_xy, support_ceiling)
 
 
 def pick_place_once(ctx: Ctx, conjunct: tuple[str, ...], attempt: int) -> Plan:
@@ -30,7 +31,14 @@ def pick_place_once(ctx: Ctx, conjunct: tuple[str, ...], attempt: int) -> Plan:
             if ctx.truth is not None:
                 ctx.truth.end_hand(obj, False)
             return
-    yield from place(ctx, obj, target)
+    if lying_long(s, obj) and s.env.is_region(target) and not s.env.region(target)["joints"]:
+        # its body origin is at one end (a bottle's base): centre its length on the region
+        # instead, or most of it hangs past one end and it slides off (measured: a bottle
+        # laid on the rack by its base fell off behind it)
+        xy = place_xy(ctx, obj, target) - box_centre_offset(s, obj)
+        yield from place_at(ctx, obj, xy, support_ceiling(s.env, target))
+    else:
+        yield from place(ctx, obj, target)
     if ctx.truth is not None:
         ctx.truth.end_hand(obj, s.satisfied(conjunct))
     if not s.satisfied(conjunct) and not carried(s, obj, checks.held(s)):
