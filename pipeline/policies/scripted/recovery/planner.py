@@ -120,8 +120,9 @@ def recover(ctx: Ctx, now: Callable[[], int], budget: int | None) -> Plan:
             # ... and any other loose object the drawer front (or the hand at its handle) would
             # run into: it jams the drawer and the hand pushes it about (a bowl on the table
             # in front of a bottom drawer); objects riding in the drawer itself go with it
+            # (only what reaches up into the drawer's height: one below a high drawer is not hit)
             loose = [o for o in s.env.object_names if o not in keep and o not in movers
-                     and not checks.in_part(s, o, joint)]
+                     and not checks.in_part(s, o, joint) and sweep is not None and s.box(o).hi[2] > sweep[0, 2]]
             under = [m for m in movers + loose
                      if sweep is not None and checks.under_sweep(s, m, sweep) and aside[m] < MAX_ASIDE]
             if under:
