@@ -25,6 +25,8 @@ FINGER_REACH = 0.047  # open fingertip centre from the grip site
 LONG_M = 0.12  # horizontal length beyond which a whole-object grasp goes to the centre of mass
 TALL_M = 0.11  # objects taller than this may be carried by a handle
 HANDLE_THIN_M, HANDLE_OUT_M = 0.016, 0.055  # a handle part: thinner than this, this far out
+UPRIGHT_COS = np.cos(np.radians(20))  # body axis this close to vertical: standing upright
+YAW_BAND = np.radians(20)  # a handle's yaw range reaches this far past pi/2 (see handle_grasp)
 YAWS = np.linspace(-np.pi / 2, np.pi / 2, 12, endpoint=False)
 # a standing book: thinner than SLAB_THIN_M, taller than SLAB_TALL_M, long. It is held near
 # its top edge so the fingers stay above a compartment's walls when it goes in (slot.py)
@@ -73,14 +75,26 @@ def _blocked(scene: Scene, pos: np.ndarray, yaw: float, top: float, skip_tips: b
     return worst
 
 
+def object_frame_boxes(scene: Scene, obj: str) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The object's collision boxes (k, 2, 3) in its own body frame, the body position, its
+    rotation (columns: body axes in world) and the centre of mass in the body frame. World
+    boxes of a turned object are wider than its parts: a thin part is thin only here."""
+    env = scene.env
+    bid = env.env.obj_body_id[obj]
+    pos = np.array(env.env.sim.data.body_xpos[bid])
+    rot = np.array(env.env.sim.data.body_xmat[bid]).reshape(3, 3)
+    local = (env.object_corners(obj).reshape(-1, 8, 3) - pos) @ rot
+    return np.stack([local.min(axis=1), local.max(axis=1)], axis=1), pos, rot, (env.object_com(obj) - pos) @ rot
+
+
 def handle_grasp(scene: Scene, obj: str) -> Grasp | None:
     """A tall object with a thin handle sticking out of its body (a moka pot): grasp the
-    handle across its thin side, at mid-height. Its top edge (what a rim grasp finds) slips."""
-    box = scene.box(obj)
-    if box.size[2] < TALL_M:
+    handle across its thin side, at mid-height. Its top edge (what a rim grasp finds) slips.
+    Found in the object's own frame, so a pot turned by any yaw is still seen to have one
+    (in world boxes a turned handle is not thin); only while it stands upright."""
+    boxes, body, rot, com = object_frame_boxes(scene, obj)
+    if rot[2, 2] < UPRIGHT_COS or float(boxes[:, 1, 2].max() - boxes[:, 0, 2].min()) < TALL_M:
         return None
-    com = scene.env.object_com(obj)
-    boxes = scene.env.object_boxes(obj)
     size = boxes[:, 1] - boxes[:, 0]
     centre = (boxes[:, 0] + boxes[:, 1]) / 2
     out = np.linalg.norm(centre[:, :2] - com[:2], axis=1)
@@ -92,9 +106,15 @@ def handle_grasp(scene: Scene, obj: str) -> Grasp | None:
     parts = boxes[thin & ((centre[:, :2] - com[:2]) @ side > 0)]
     lo, hi = parts[:, 0].min(axis=0), parts[:, 1].max(axis=0)
     thin_axis = int(np.argmin((hi - lo)[:2]))  # fingers close along it
-    yaw = np.pi / 2 if thin_axis == 0 else 0.0
-    pos = (lo + hi) / 2
-    return Grasp(pos=pos, yaw=float(yaw), rim=False)
+    d = rot[:, thin_axis]  # ... in world
+    # closing_axis(yaw) = (-sin, cos), the same for yaw + pi: yaw in (-pi/2, pi/2] as for an
+    # unturned pot (0 or pi/2), widened by YAW_BAND so a pot turned a few degrees the other
+    # way is not grasped with the hand turned half round
+    yaw = float(np.arctan2(-d[0], d[1]))
+    lo_yaw = -np.pi / 2 + YAW_BAND
+    yaw = yaw - np.pi if yaw > lo_yaw + np.pi else yaw + np.pi if yaw <= lo_yaw else yaw
+    pos = body + rot @ ((lo + hi) / 2)
+    return Grasp(pos=pos, yaw=yaw, rim=False)
 
 
 def plan_grasp(scene: Scene, obj: str, dest: np.ndarray | None = None, choice: int = 0) -> Grasp:

@@ -28,6 +28,10 @@ Plan = Iterator[Primitive]
 HAND_CLEARANCE = 0.07  # grip site above obstacles when the hand moves empty
 CARRY_CLEARANCE = 0.04  # held object's bottom above obstacles in transit
 MAX_Z = 1.35  # keep targets inside the arm's comfortable workspace
+REGION_INSIDE = 0.8  # fraction of a region's half extent a placed body is kept within
+STAND_MIN_TILT, STAND_MAX_TILT = 4.0, 45.0  # degrees: a held object tilted this much is stood up
+STAND_GAP = 0.004  # ... lowered until its upright bottom is this far above the support
+STAND_TOL = 0.016  # ... or the hand is this close to there
 
 
 @dataclass
@@ -79,10 +83,13 @@ def free_hand(ctx: Ctx) -> Plan:
 
 
 def grasp(ctx: Ctx, obj: str, dest: np.ndarray | None = None, choice: int = 0, hover_m: float = 0.08,
-          g=None) -> Plan:
+          turn_tol: float | None = None, g=None) -> Plan:
     """Reach above the object, descend, close, lift. `choice` / `hover_m`: another grasp
-    candidate and a higher hover (the recovery expert's retries); `g`: a `Grasp` chosen by
-    the caller instead (the recovery expert's, see recovery/long_grasp.py)."""
+    candidate and a higher hover (the recovery expert's retries). `turn_tol` (radians): the
+    hover also waits until the hand has turned to the grasp's yaw, so a hand still turning
+    does not sweep its fingers into the object on the way down (the recovery expert; a
+    plain expert's start leaves little to turn). `g`: a `Grasp` chosen by the caller
+    instead (the recovery expert's, see recovery/long_grasp.py)."""
     s = ctx.scene
     g = g if g is not None else plan_grasp(s, obj, dest, choice)
     offset = ctx.noise.grasp_offset()
@@ -91,7 +98,7 @@ def grasp(ctx: Ctx, obj: str, dest: np.ndarray | None = None, choice: int = 0, h
     lift_z = s.path_clearance(s.eef(), pos, 0.06, {obj}) + HAND_CLEARANCE
     hover = pos + [0, 0, hover_m]
     yield from travel(ctx, hover, g.yaw, -1.0, lift_z)
-    yield ctx.move(hover, yaw=g.yaw, tol=0.012, label="hover")
+    yield ctx.move(hover, yaw=g.yaw, tol=0.012, label="hover", rot_tol=turn_tol)
     t = ctx.noise.timing()
     ctx.note(grasp_timing=t)
     early = {"switch_gripper": 1.0, "switch_dist": 0.005 * -t} if t < 0 else {}
@@ -145,8 +152,12 @@ def _place_choice(ctx: Ctx, obj: str, target: str) -> tuple[np.ndarray, int]:
     fine = int(np.argmax(np.abs(np.asarray(s.env.joint_frame(r["joints"][0])["axis"][:2])))) if drawer else -1
     nx, ny = (41 if fine == 0 else 7 if drawer else 11), (41 if fine == 1 else 7 if drawer else 11)
     blocked = _drawer_clearance(s, obj, r["joints"][0], r["pos"][:2], half[:2], top) if drawer else (lambda p: 0)
-    for fx in np.linspace(-1.0, 1.0, nx):
-        for fy in np.linspace(-1.0, 1.0, ny):
+    # on a region (not in a drawer) the body must end inside it (LIBERO's `On` tests the body
+    # origin against the region's extent): a spot on its very edge, where a crowded region
+    # (the second moka pot beside the first) pushed it, left the body just outside
+    edge = 1.0 if drawer else REGION_INSIDE
+    for fx in np.linspace(-edge, edge, nx):
+        for fy in np.linspace(-edge, edge, ny):
             p = r["pos"][:2] + half[:2] * [fx, fy]
             # overlap (m^2) of the footprint with objects already there: least wins
             lo, hi = p - size / 2, p + size / 2
@@ -214,7 +225,8 @@ def destination(ctx: Ctx, obj: str, target: str) -> np.ndarray:
     return np.array([dest[0], dest[1], s.support_top(foot, radius, {obj}, below=below)])
 
 
-def place(ctx: Ctx, obj: str, target: str) -> Plan:
+def place(ctx: Ctx, obj: str, target: str, stand: bool = False) -> Plan:
+    """`stand`: see `place_at` (the recovery expert)."""
     # a book into a narrow compartment or a roofed shelf goes in its own way (slot.py,
     # shelf.py, tip_push.py; imported here because they build on this module's `travel`)
     from pipeline.policies.scripted.shelf import open_side, shelf_opening, slide_into_shelf
@@ -241,12 +253,32 @@ def place(ctx: Ctx, obj: str, target: str) -> Plan:
         # from the open side, not lowered onto the board above
         yield from slide_in.slide_in(ctx, obj, comp)
         return
-    yield from place_at(ctx, obj, place_xy(ctx, obj, target), support_ceiling(ctx.scene.env, target))
+    yield from place_at(ctx, obj, place_xy(ctx, obj, target), support_ceiling(ctx.scene.env, target), stand=stand)
 
 
-def place_at(ctx: Ctx, obj: str, xy: np.ndarray, below: float = np.inf) -> Plan:
+def upright_hold(s: Scene, obj: str) -> tuple[np.ndarray, float] | None:
+    """For an upright-standing object that tilted in the hand (a moka pot held by its
+    handle swings about the fingers' axis): the grip site relative to the body, and its
+    height above the object's bottom, as they will be once the object stands upright
+    again. None when it is not tilted (or lies on its side: then it is put down as held)."""
+    from pipeline.policies.scripted.grasps import object_frame_boxes
+
+    boxes, body, rot, _ = object_frame_boxes(s, obj)
+    if not np.cos(np.radians(STAND_MAX_TILT)) < rot[2, 2] < np.cos(np.radians(STAND_MIN_TILT)):
+        return None
+    g = (s.eef() - body) @ rot  # grip site in the object's frame
+    heading = float(np.arctan2(rot[1, 0], rot[0, 0]))
+    c, si = np.cos(heading), np.sin(heading)
+    upright = np.array([[c, -si, 0.0], [si, c, 0.0], [0.0, 0.0, 1.0]])
+    return upright @ g, float(g[2] - boxes[:, 0, 2].min())
+
+
+def place_at(ctx: Ctx, obj: str, xy: np.ndarray, below: float = np.inf, stand: bool = False) -> Plan:
     """Carry the held object so its body comes down at `xy` on whatever supports it there
-    (ignoring boxes whose top is at or above `below`), release, retreat."""
+    (ignoring boxes whose top is at or above `below`), release, retreat. `stand`: an
+    upright object that tilted in the hand is lowered as if it stood upright, so its low
+    edge meets the support first and the pressing turns it upright in the fingers before
+    they open (released tilted, a pot falls over)."""
     s = ctx.scene
     env = s.env
     eef = s.eef()
@@ -254,6 +286,11 @@ def place_at(ctx: Ctx, obj: str, xy: np.ndarray, below: float = np.inf) -> Plan:
     box = s.box(obj)
     hold = eef - body  # grip site relative to the object body, kept while carrying
     bottom = eef[2] - box.lo[2]  # grip site above the object's bottom
+    carry_bottom, gap = bottom, 0.015
+    up = upright_hold(s, obj) if stand else None
+    if up is not None:  # down to just above the support: the low edge presses it upright
+        hold, bottom = up
+        gap = STAND_GAP
     radius = 0.6 * float(min(box.size[0], box.size[1])) / 2
     offset_xy = ctx.noise.place_offset()[:2]
     dest = np.asarray(xy, dtype=float)[:2] + offset_xy
@@ -261,8 +298,8 @@ def place_at(ctx: Ctx, obj: str, xy: np.ndarray, below: float = np.inf) -> Plan:
     support = s.support_top(foot, radius, {obj}, below=below)
     offset_z = abs(ctx.noise.place_offset()[2])
     ctx.note(place_offset=[offset_xy[0], offset_xy[1], offset_z])
-    release_z = support + 0.015 + bottom + offset_z
-    lift_z = s.path_clearance(box.centre, foot, radius, {obj}) + CARRY_CLEARANCE + bottom
+    release_z = support + gap + bottom + offset_z
+    lift_z = s.path_clearance(box.centre, foot, radius, {obj}) + CARRY_CLEARANCE + max(bottom, carry_bottom)
     goal = np.array([dest[0] + hold[0], dest[1] + hold[1], release_z])
     yaw = ctx.yaw_hold
     yield from travel(ctx, goal, yaw, 1.0, max(lift_z, release_z + 0.05))
@@ -274,7 +311,10 @@ def place_at(ctx: Ctx, obj: str, xy: np.ndarray, below: float = np.inf) -> Plan:
     t = ctx.noise.timing()
     ctx.note(release_timing=t)
     early = {"switch_gripper": -1.0, "switch_dist": 0.006 * -t} if t < 0 else {}
-    yield ctx.move(goal, gripper=1.0, speed=0.5, yaw=yaw, tol=0.01, max_steps=60, label="lower", **early)
+    # (stood up: the pot's low edge on the support stops the hand ~1 cm short of the goal;
+    # a wider tolerance lets go there instead of pressing out the step limit)
+    yield ctx.move(goal, gripper=1.0, speed=0.5, yaw=yaw, tol=0.01 if up is None else STAND_TOL, max_steps=60,
+                   label="lower", **early)
     yield Grip(-1.0, ctx.open_steps + max(t, 0), label="open")
     yield ctx.move(s.eef() + [0, 0, 0.08], yaw=yaw, tol=0.02, label="retreat")
 

@@ -14,6 +14,8 @@ from pipeline.policies.scripted.stack import carried
 from pipeline.policies.scripted.skills import (Ctx, Plan, box_centre_offset, destination, free_hand, grasp, place,
                                               place_at, place_xy, support_ceiling)
 
+TURN_TOL = 0.15  # radians of yaw still to turn at which the hand may go down to grasp
+
 
 def pick_place_once(ctx: Ctx, conjunct: tuple[str, ...], attempt: int) -> Plan:
     _, obj, target = conjunct
@@ -25,7 +27,7 @@ def pick_place_once(ctx: Ctx, conjunct: tuple[str, ...], attempt: int) -> Plan:
         # a candidate whose fingers land clear of other objects (they would be clamped too)
         choice = checks.clear_grasp_choice(s, obj, dest, attempt)
         yield from grasp(ctx, obj, dest, choice=choice, g=slide_clear(s, obj, plan_grasp(s, obj, dest, choice)),
-                         hover_m=0.08 + 0.03 * min(attempt, 2))
+                         hover_m=0.08 + 0.03 * min(attempt, 2), turn_tol=TURN_TOL)
         if not carried(s, obj, checks.held(s)):
             ctx.events.append(f"missed_grasp:{obj}")
             if ctx.truth is not None:
@@ -38,7 +40,7 @@ def pick_place_once(ctx: Ctx, conjunct: tuple[str, ...], attempt: int) -> Plan:
         xy = place_xy(ctx, obj, target) - box_centre_offset(s, obj)
         yield from place_at(ctx, obj, xy, support_ceiling(s.env, target))
     else:
-        yield from place(ctx, obj, target)
+        yield from place(ctx, obj, target, stand=True)
     if ctx.truth is not None:
         ctx.truth.end_hand(obj, s.satisfied(conjunct))
     if not s.satisfied(conjunct) and not carried(s, obj, checks.held(s)):
