@@ -293,6 +293,10 @@ class ReleaseConfig(_Strict):
     lerobot_dir: Path | None = None
     lerobot_image_size: int = Field(default=256, ge=32, le=1024)
     lerobot_episodes: Literal["failures", "all"] = "all"  # which stage-1 rollouts to export
+    # standard: LIBERO's look (4x multisampling, reflections), what policies are trained on;
+    # fast: neither, about 2x cheaper per software-rendered frame, slightly different pixels
+    # (pipeline/sim/render.py). Training on fast frames and evaluating on standard ones is a shift.
+    lerobot_render_quality: Literal["standard", "fast"] = "standard"
 
 
 class EvalConfig(_Strict):

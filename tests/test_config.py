@@ -61,6 +61,14 @@ def test_unknown_suite_and_bad_fps_are_rejected(tmp_path):
         load_config(_write(tmp_path, {"stage1": {"video": {"fps": 3}}}))
 
 
+def test_lerobot_render_quality_defaults_to_liberos_look_and_refuses_others(tmp_path):
+    assert load_config(_write(tmp_path, {"run": {"seed": 0}})).release.lerobot_render_quality == "standard"
+    fast = load_config(_write(tmp_path, {"release": {"lerobot_render_quality": "fast"}}))
+    assert fast.release.lerobot_render_quality == "fast"
+    with pytest.raises(ConfigError, match=r"(?s)cfg\.yaml.*release\.lerobot_render_quality: .*'standard' or 'fast'"):
+        load_config(_write(tmp_path, {"release": {"lerobot_render_quality": "draft"}}))
+
+
 def test_missing_file_and_broken_yaml_are_config_errors(tmp_path):
     with pytest.raises(ConfigError, match="no such config file"):
         load_config(tmp_path / "nope.yaml")

@@ -9,13 +9,23 @@ release manifest (`scenarios.parquet`, for the histories), and the recovery demo
 original instruction; episodes.jsonl also names each demo's scene id, level and
 category), each a LeRobot v2.1 dataset (`pipeline.release.lerobot_format`). Frames are rendered from the
 logged states at 20 Hz (every control step), third-person and wrist cameras, right side
-up; state = eef position, eef axis-angle, the two gripper finger positions (8-D, as in
-LIBERO's LeRobot datasets); action = the 7-D command. Resumable: an episode's files are
-written before its done-marker (`<out>/_work/<dataset>/_done`); meta files come last.
+up, at `release.lerobot_render_quality` (standard: LIBERO's look); state = eef position, eef
+axis-angle, the two gripper finger positions (8-D, as in LIBERO's LeRobot datasets); action =
+the 7-D command.
+
+Episodes are rendered in parallel as a `Stage` (pipeline/runner/) on the run's executor: one
+unit per episode, the episodes of one simulator model (suite, task, BDDL content) share a
+shard, so a worker builds each model once. A worker writes an episode's files, then its
+entry (`<out>/_work/<dataset>/<i>.json`), then the runner its done-marker (`_work/<dataset>/_done`):
+resumable. The parent writes the meta files last, from the entries in episode order, so a
+dataset is the same, byte for byte, whatever the number of workers. An episode that fails is
+set aside with the reason and the others go on; its dataset then gets no meta files and the
+export fails naming it (a rerun does only what is missing).
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,17 +33,17 @@ from pathlib import Path
 import numpy as np
 import pyarrow.parquet as pq
 from rich.console import Console
-from rich.progress import Progress
 
-from pipeline.atomic import Completions, write_json, write_with
+from pipeline.atomic import write_json, write_with
 from pipeline.config import Config
-from pipeline.errors import ConfigError
+from pipeline.errors import ConfigError, FatalError
 from pipeline.layout import EpisodeFiles, RunLayout, episode_key
 from pipeline.records import read_episodes
 from pipeline.release import lerobot_format as fmt
 from pipeline.release.manifest import MANIFEST_NAME
 from pipeline.release.scene_physics import scene_task
-from pipeline.sim import EnvCache, SimEnv, get_task
+from pipeline.runner import Stage, UnitResult, WorkerContext
+from pipeline.sim import SimEnv, get_task
 from pipeline.sim.rotations import mat_to_quat
 
 
@@ -57,7 +67,8 @@ def axis_angle(rot: np.ndarray) -> np.ndarray:
     return np.zeros(3) if s < 1e-9 else q[1:] * (2 * np.arccos(min(q[0], 1.0)) / s)
 
 
-def render_episode(env: SimEnv, states: np.ndarray, size: int) -> tuple[np.ndarray, dict[str, np.ndarray]]:
+def render_episode(env: SimEnv, states: np.ndarray, size: int,
+                   quality: str = "standard") -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """8-D robot states and frames per LeRobot video key for each logged simulator state."""
     robot, frames = [], {k: [] for k in fmt.VIDEO_KEYS}
     for s in states:
@@ -65,7 +76,7 @@ def render_episode(env: SimEnv, states: np.ndarray, size: int) -> tuple[np.ndarr
         pos, rot = env.eef_pose()
         robot.append(np.concatenate([pos, axis_angle(rot), env.gripper_qpos()]))
         for key, cam in fmt.VIDEO_KEYS.items():
-            frames[key].append(env.render(cam, size))
+            frames[key].append(env.render(cam, size, quality))
     return np.asarray(robot), {k: np.stack(v) for k, v in frames.items()}
 
 
@@ -131,12 +142,12 @@ def recovery_episodes(cfg: Config, release: Path) -> list[ExportEpisode]:
 
 
 def export_episode(env: SimEnv, ep: ExportEpisode, i: int, start: int, task_index: int, root: Path,
-                   size: int) -> dict:
+                   size: int, quality: str = "standard") -> dict:
     """Render and write episode `i`; return its episodes.jsonl/episodes_stats.jsonl entry."""
     files = EpisodeFiles(ep.folder)
     states = np.load(files.states)[: ep.length]
     actions = np.array(pq.read_table(files.steps).column("action").to_pylist())[: ep.length]
-    robot, frames = render_episode(env, states, size)
+    robot, frames = render_episode(env, states, size, quality)
     table = fmt.frame_table(robot, actions, i, start, task_index)
     write_with(root / fmt.data_path(i), lambda p: pq.write_table(table, p))
     for key, f in frames.items():
@@ -145,25 +156,91 @@ def export_episode(env: SimEnv, ep: ExportEpisode, i: int, start: int, task_inde
             "meta": ep.meta, "stats": fmt.episode_stats(table, frames)}
 
 
-def export_dataset(episodes: list[ExportEpisode], root: Path, work: Path, size: int, envs: EnvCache,
-                   progress: Progress) -> int:
-    """Write one v2.1 dataset (episodes grouped by task: one build each); return its frame count."""
-    done = Completions(work)
+@dataclass
+class ExportUnit:
+    """Episode `index` of a dataset, with what its files need from the whole dataset."""
+
+    index: int
+    start: int  # its first frame's dataset-wide `index`
+    task_index: int
+    episode: ExportEpisode
+    model: str  # the simulator model it is rendered in (episodes of one model share a shard)
+
+    @property
+    def unit_id(self) -> str:
+        return f"{self.index:06d}"
+
+
+def plan_units(episodes: list[ExportEpisode]) -> tuple[list[ExportUnit], list[str]]:
+    """One unit per episode, ordered by model (then index), and the dataset's task list."""
     tasks = sorted({e.instruction for e in episodes})
     starts = np.concatenate([[0], np.cumsum([e.length for e in episodes])]).astype(int)
-    job = progress.add_task(f"LeRobot {root.name}", total=len(episodes))
-    order = sorted(enumerate(episodes), key=lambda x: (x[1].suite, x[1].task, x[0]))
-    for i, ep in order:
-        if not done.is_done(f"{i:06d}"):
-            env = envs.get(get_task(ep.suite, ep.task) if ep.bddl is None else
-                           scene_task(ep.suite, ep.task, ep.instruction, ep.bddl))
-            meta = export_episode(env, ep, i, int(starts[i]), tasks.index(ep.instruction), root, size)
-            write_json(work / f"{i:06d}.json", meta)
-            done.mark_done(f"{i:06d}")
-        progress.advance(job)
+    digests: dict[Path, str] = {}
+
+    def model(ep: ExportEpisode) -> str:
+        if ep.bddl is None:
+            return f"{ep.suite}/{ep.task}"
+        if ep.bddl not in digests:  # scenes of one task often share their BDDL text: one build
+            digests[ep.bddl] = hashlib.sha256(ep.bddl.read_bytes()).hexdigest()
+        return f"{ep.suite}/{ep.task}/{digests[ep.bddl]}"
+
+    units = [ExportUnit(i, int(starts[i]), tasks.index(ep.instruction), ep, model(ep))
+             for i, ep in enumerate(episodes)]
+    return sorted(units, key=lambda u: (u.model, u.index)), tasks
+
+
+@dataclass
+class ExportStage(Stage[ExportUnit]):
+    """Renders and writes one dataset's episodes (the meta files are the parent's: `export_dataset`)."""
+
+    dataset: str  # its folder
+    work: str  # `_work/<dataset>`: episode entries and done-markers
+    size: int
+    quality: str
+    planned: list[ExportUnit]
+
+    @property
+    def name(self) -> str:
+        return f"LeRobot {Path(self.dataset).name}"
+
+    @property
+    def root(self) -> Path:
+        return Path(self.work)
+
+    def units(self, cfg=None) -> list[ExportUnit]:
+        return self.planned
+
+    def group(self, unit: ExportUnit) -> str:
+        return unit.model
+
+    def process(self, unit: ExportUnit, ctx: WorkerContext) -> UnitResult:
+        ep = unit.episode
+        env = ctx.env(get_task(ep.suite, ep.task) if ep.bddl is None else
+                      scene_task(ep.suite, ep.task, ep.instruction, ep.bddl))
+        meta = export_episode(env, ep, unit.index, unit.start, unit.task_index, Path(self.dataset), self.size,
+                              self.quality)
+        write_json(self.root / f"{unit.unit_id}.json", meta)  # before the marker (the runner's, last)
+        return UnitResult(ok=True)  # the bar's "ok n/m": episodes written
+
+    def set_aside(self, unit: ExportUnit, error: Exception) -> UnitResult:
+        return UnitResult.set_aside(type(error).__name__, f"{unit.episode.key}: {error}")
+
+
+def export_dataset(episodes: list[ExportEpisode], root: Path, work: Path, size: int, runner,
+                   quality: str = "standard") -> int:
+    """Write one v2.1 dataset on `runner` (a `pipeline.runner.Runner`); return its frame count.
+    Raises FatalError naming the episodes set aside (no meta files then)."""
+    units, tasks = plan_units(episodes)
+    stage = ExportStage(str(root), str(work), size, quality, units)
+    todo = runner.pending(stage, units)
+    stats = runner.execute(stage, todo, done_before=len(units) - len(todo))
+    if stats.set_aside:
+        raise FatalError(f"export-lerobot {root.name}: {len(stats.set_aside)} episode(s) set aside, no meta "
+                         f"written (rerun to retry them): " + "; ".join(
+                             f"{ev.unit}: {ev.reason}: {(ev.detail or '').strip()[:200]}" for ev in stats.set_aside))
     metas = [json.loads((work / f"{i:06d}.json").read_text()) for i in range(len(episodes))]
     fmt.write_meta(root, metas, tasks, size)
-    return int(starts[-1])
+    return sum(e.length for e in episodes)
 
 
 DATASETS = ("rollouts", "pre_failure_histories", "recoveries")
@@ -183,12 +260,23 @@ def run(cfg: Config, out: Path | None = None, only: list[str] | None = None) -> 
                "pre_failure_histories": lambda: history_episodes(cfg, layout.release.manifest),
                "recoveries": lambda: recovery_episodes(cfg, layout.release.root)}
     datasets = {name: sources[name]() for name in DATASETS if not only or name in only}
+    from pipeline.executors import make_executor
+    from pipeline.runner import Runner
+
     console = Console()
-    with Progress(console=console, transient=True) as progress, EnvCache(capacity=1) as envs:
-        for name, episodes in datasets.items():
-            if name == "recoveries" and not episodes:
-                console.print("[yellow]recoveries[/yellow]: no recovery demos (run `recover demos` first); skipped")
-                continue
-            frames = export_dataset(episodes, out / name, out / "_work" / name, size, envs, progress)
-            console.print(f"[green]{name}[/green]: {len(episodes)} episode(s), {frames} frames -> {out / name}")
+    runner = Runner(make_executor(cfg.executor), console=console)
+    failed = []
+    for name, episodes in datasets.items():
+        if name == "recoveries" and not episodes:
+            console.print("[yellow]recoveries[/yellow]: no recovery demos (run `recover demos` first); skipped")
+            continue
+        try:
+            frames = export_dataset(episodes, out / name, out / "_work" / name, size, runner,
+                                    cfg.release.lerobot_render_quality)
+        except FatalError as e:  # episodes set aside: the other datasets still go on
+            failed.append(str(e))
+            continue
+        console.print(f"[green]{name}[/green]: {len(episodes)} episode(s), {frames} frames -> {out / name}")
+    if failed:
+        raise FatalError("\n".join(failed))
     return out

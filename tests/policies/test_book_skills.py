@@ -49,3 +49,45 @@ def test_a_moved_and_turned_book_goes_upright_into_the_front_compartment():
         assert hi[2] - lo[2] > 0.12  # standing, not lying across the compartments
     finally:
         env.close()
+
+
+def test_the_tilted_hand_closes_across_a_leaning_books_faces_and_points_down_its_spine_axis():
+    from pipeline.policies.scripted.primitives import hand_orientation
+    from pipeline.policies.scripted.recovery.stand_book import BookAxes, tilted_grasp
+
+    # the book of a released scene, leaning 52 deg across the caddy (its faces tilted too)
+    up, thin = np.array([0.002, 0.789, 0.615]), np.array([-0.781, -0.383, 0.494])
+    up, thin = up / np.linalg.norm(up), thin - (thin @ up) * up / np.linalg.norm(up)
+    thin /= np.linalg.norm(thin)
+    ax = BookAxes(up=up, thin=thin, top_mid=np.zeros(3), long=np.cross(thin, up), ends=(np.zeros(3), np.zeros(3)))
+    yaw, approach = tilted_grasp(ax)
+    hand = hand_orientation(yaw, approach)
+    assert abs(abs(hand[:, 0] @ thin) - 1) < 1e-6  # fingers close along the faces' normal
+    assert np.allclose(hand[:, 2], -up, atol=1e-6)  # the hand points down the book's up axis
+    # turned back to pointing down at the same yaw, the book held so would stand upright
+    turn = hand_orientation(yaw) @ hand.T
+    assert np.allclose(turn @ up, [0, 0, 1], atol=1e-6)
+
+
+@pytest.mark.sim
+def test_a_book_leaning_across_the_caddy_is_stood_up_in_the_hand_and_goes_into_the_back_compartment():
+    from pipeline.policies.scripted.recovery import make_recovery_expert
+    from pipeline.policies.scripted.recovery.stand_book import stand_tilt
+    from pipeline.policies.scripted.scene import Scene
+    from pipeline.rollout import run_episode
+
+    task = tasks(["libero_10"])[5]  # STUDY_SCENE1: the book into the caddy's back compartment
+    env = build_env(task)
+    try:
+        start(env)
+        # the pose of a released failure: fallen across the right compartment, 52 deg off
+        # upright, its faces tilted too; every top-down grasp of it missed
+        set_pose(env, "black_book_1", [-0.381, -0.059, 1.039], np.array([-0.297, 0.146, 0.414, 0.848]), settle=40)
+        assert stand_tilt(Scene(env), "black_book_1") is not None
+        policy = make_recovery_expert(env, task, seed=0)
+        result = run_episode(env, policy, horizon=300, chunk_size=8)
+        assert result.success, policy.events
+        lo, hi = env.object_aabb("black_book_1")
+        assert hi[2] - lo[2] > 0.12  # it went in standing
+    finally:
+        env.close()

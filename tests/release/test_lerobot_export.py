@@ -14,6 +14,8 @@ import numpy as np
 import pyarrow.parquet as pq
 import pytest
 
+import pipeline.release.lerobot_export as lerobot_export
+from pipeline.errors import FatalError
 from pipeline.release.build import build
 from pipeline.release.lerobot_export import run as export
 from tests.release.factories import make_run, npy_bytes, release_config
@@ -33,6 +35,7 @@ def exported(tmp_path_factory, scene_source) -> tuple[Path, object]:
                    {"ep-a": (good, scene_source.bddl_text), "ep-b": (good, scene_source.bddl_text)})
     cfg = release_config(run, lerobot_image_size=SIZE)
     build(cfg)
+    assert (cfg.executor.kind, cfg.executor.workers) == ("local", 2)  # 2 worker processes, one episode each
     return export(cfg), scene_source
 
 
@@ -137,3 +140,43 @@ def test_lerobots_own_dataset_class_opens_the_export(exported, tmp_path):
         theirs = np.frombuffer(base64.b64decode(mid[key]["rgb24"]), np.uint8).reshape(SIZE, SIZE, 3)
         diff = [np.abs(theirs.astype(int) - f.astype(int)).mean() for f in ours]
         assert diff[6] < 0.5 and int(np.argmin(diff)) == 6, (key, diff)
+
+
+def _files(root: Path) -> dict[str, bytes]:
+    return {str(p.relative_to(root)): p.read_bytes() for p in sorted(root.rglob("*")) if p.is_file()}
+
+
+def test_one_worker_writes_the_same_dataset_byte_for_byte(exported, tmp_path):
+    out, _ = exported  # 2 workers: the group of two episodes (one model) was split across them
+    cfg = release_config(out.parent, lerobot_image_size=SIZE)
+    one = cfg.model_copy(update={"executor": cfg.executor.model_copy(update={"kind": "inline"})})  # this process
+    single = export(one, tmp_path / "one", only=["rollouts"])
+    ours, theirs = _files(out / "rollouts"), _files(single / "rollouts")
+    assert sorted(ours) == sorted(theirs) and len(ours) == 4 + 2 + 5  # 4 videos, 2 parquet, 5 meta files
+    assert ours == theirs  # x264 is deterministic: the same frames give the same MP4 bytes
+    for name in ("000000.json", "000001.json"):
+        assert (out / "_work/rollouts" / name).read_bytes() == (single / "_work/rollouts" / name).read_bytes()
+
+
+def test_a_failing_episode_is_set_aside_and_a_rerun_does_only_what_is_missing(tmp_path, scene_source, monkeypatch):
+    good = npy_bytes(scene_source.failure)
+    run = make_run(tmp_path / "run", scene_source, {"ep-a": (good, scene_source.bddl_text),
+                                                    "ep-b": (good, scene_source.bddl_text)})
+    cfg = release_config(run, lerobot_image_size=SIZE)
+    cfg = cfg.model_copy(update={"executor": cfg.executor.model_copy(update={"kind": "inline"})})  # patchable
+    states = next((run / "stage1/episodes").rglob("ep-b/states.npy"))
+    intact = states.read_bytes()
+    states.write_bytes(b"not an array")
+    with pytest.raises(FatalError, match=r"rollouts: 1 episode\(s\) set aside.*000001: .*ep-b"):
+        export(cfg, only=["rollouts"])
+    root = run / "lerobot/rollouts"
+    assert (root / "data/chunk-000/episode_000000.parquet").is_file()  # the other episode went on
+    assert not (root / "meta").exists()  # no meta for an incomplete dataset
+    states.write_bytes(intact)
+    rendered = []
+    real = lerobot_export.export_episode
+    monkeypatch.setattr(lerobot_export, "export_episode",
+                        lambda env, ep, i, *a: rendered.append(i) or real(env, ep, i, *a))
+    export(cfg, only=["rollouts"])
+    assert rendered == [1]
+    assert json.loads((root / "meta/info.json").read_text())["total_episodes"] == 2

@@ -123,15 +123,42 @@ def place_room(ctx: Ctx, obj: str, target: str) -> bool:
     return _place_choice(ctx, obj, target)[1] == 0
 
 
-def _place_choice(ctx: Ctx, obj: str, target: str) -> tuple[np.ndarray, int]:
-    """Where the object's body should end up (xy): on an object's body or a region's centre;
-    in a drawer, the point nearest its centre where the object's footprint lies inside the
-    walls with open sky above (an open bottom drawer lies partly under the drawers above it
-    and their handles)."""
+# a long object lying in a drawer (a toppled wine bottle, 18 cm) may fit only turned along the
+# drawer: hand turns tried, least first, when no spot is clear at the object's own yaw
+TURNS = (-np.pi / 4, np.pi / 4, -np.pi / 2, np.pi / 2)
+LONG_RATIO = 1.8  # footprint length / width above which turns are tried
+HAND_SPAN = 0.09  # the closed fingers' outer width across a held object: clear of walls and handles too
+# the hand's housing above the fingers: ~20 cm along the closing axis, ~6 cm across, from
+# ~7 cm over the drawer floor: off the drawer it meets the cabinet's face (it clears a low
+# front wall, and the handles hanging over the drawer from above)
+HOUSING_HALF, HOUSING_Z = np.array([0.03, 0.10]), 0.07
+
+
+def _turned_foot(s: Scene, obj: str, turn: float) -> tuple[np.ndarray, np.ndarray]:
+    """Size (xy) and centre relative to the body origin of the object's footprint box after
+    the hand turns it by `turn` about the vertical."""
+    c, sn = np.cos(turn), np.sin(turn)
+    rel = (s.env.object_corners(obj)[:, :2] - s.env.object_pose(obj)[0][:2]) @ np.array([[c, sn], [-sn, c]])
+    lo, hi = rel.min(axis=0), rel.max(axis=0)
+    return hi - lo, (lo + hi) / 2
+
+
+def _is_long(s: Scene, obj: str) -> bool:
+    xy = s.env.object_corners(obj)[:, :2]
+    widths = [float(np.ptp(xy @ [np.cos(t), np.sin(t)])) for t in np.linspace(0, np.pi, 36, endpoint=False)]
+    return max(widths) > LONG_RATIO * min(widths)
+
+
+def _place_choice(ctx: Ctx, obj: str, target: str) -> tuple[np.ndarray, int, float]:
+    """Where the object's body should end up (xy), how many footprint cells are blocked there,
+    and the hand turn (rad) to carry it with: on an object's body or a region's centre; in a
+    drawer, the point nearest its centre where the object's footprint lies inside the walls
+    with open sky above (an open bottom drawer lies partly under the drawers above it and
+    their handles); a long object that fits nowhere as it lies is tried turned (`TURNS`)."""
     s = ctx.scene
     xy = s.pos(target)[:2].copy()
     if not s.env.is_region(target):
-        return xy, 0
+        return xy, 0, 0.0
     r = s.env.region(target)
     drawer = bool(r["joints"])
     _, half = region_box(s.env, target)
@@ -144,14 +171,36 @@ def _place_choice(ctx: Ctx, obj: str, target: str) -> tuple[np.ndarray, int]:
     if s.env.region(target)["parent"] in s.env.object_names:
         others = []  # a container object (a basket): things may share its middle
     if not drawer and not others:
-        return xy, 0
+        return xy, 0, 0.0
+    best = _best_spot(s, obj, r, half, top, xy, others, size, None)
+    if drawer and best[0][0] > 0 and _is_long(s, obj):
+        # judged again with the hand and the footprint's true extent, as it lies and turned
+        best = None
+        for turn in (0.0, *TURNS):
+            size_t, shift_t = _turned_foot(s, obj, turn)
+            # the fingers close across its width at its middle and go down with it
+            size_t[np.argmin(size_t)] = max(float(size_t.min()), HAND_SPAN)
+            cand = _best_spot(s, obj, r, half, top, xy, others, size_t, shift_t)
+            if best is None or cand[0][0] < best[0][0]:
+                best = (cand[0], cand[1], turn)
+            if best[0][0] == 0:
+                break
+    return best[1], best[0][0], best[2]
+
+
+def _best_spot(s: Scene, obj: str, r: dict, half: np.ndarray, top: float, xy: np.ndarray, others: list,
+               size: np.ndarray, shift: np.ndarray | None) -> tuple[tuple, np.ndarray, float]:
+    """((blocked cells, crowd and distance), body xy, turn 0) of the best grid point; `shift`
+    (a turned footprint's centre from the body) also makes footprint cells off the region count."""
+    drawer = bool(r["joints"])
     best = None
     # a drawer leaves a window only a few mm long between its front wall and the handles
     # of the drawers above (the white cabinet's bottom drawer and a bowl): a fine grid
     # along its axis, and the object's footprint (not its body origin) kept off both
     fine = int(np.argmax(np.abs(np.asarray(s.env.joint_frame(r["joints"][0])["axis"][:2])))) if drawer else -1
     nx, ny = (41 if fine == 0 else 7 if drawer else 11), (41 if fine == 1 else 7 if drawer else 11)
-    blocked = _drawer_clearance(s, obj, r["joints"][0], r["pos"][:2], half[:2], top) if drawer else (lambda p: 0)
+    blocked = (_drawer_clearance(s, obj, r["joints"][0], r["pos"][:2], half[:2], top, size, shift) if drawer
+               else (lambda p: 0))
     # on a region (not in a drawer) the body must end inside it (LIBERO's `On` tests the body
     # origin against the region's extent): a spot on its very edge, where a crowded region
     # (the second moka pot beside the first) pushed it, left the body just outside
@@ -160,40 +209,59 @@ def _place_choice(ctx: Ctx, obj: str, target: str) -> tuple[np.ndarray, int]:
         for fy in np.linspace(-edge, edge, ny):
             p = r["pos"][:2] + half[:2] * [fx, fy]
             # overlap (m^2) of the footprint with objects already there: least wins
-            lo, hi = p - size / 2, p + size / 2
+            c = p if shift is None else p + shift  # the object's own box is taken centred on its body
+            lo, hi = c - size / 2, c + size / 2
             crowd = sum(float(np.prod(np.clip(np.minimum(hi, b.hi[:2]) - np.maximum(lo, b.lo[:2]), 0, None)))
                         for b in others)
             # footprint cells over a wall or under an overhang: fewest wins (none, where there is room)
             d = (blocked(p), 100 * crowd + float(np.linalg.norm(p - xy)))
             if best is None or d < best[0]:
                 best = (d, p)
-    return (xy, 0) if best is None else (best[1], best[0][0])
+    return (best[0], best[1], 0.0) if best is not None else ((0, 0.0), xy, 0.0)
 
 
-def _drawer_clearance(s: Scene, obj: str, joint: str, centre: np.ndarray, half: np.ndarray, top: float):
+def _drawer_clearance(s: Scene, obj: str, joint: str, centre: np.ndarray, half: np.ndarray, top: float,
+                      size: np.ndarray | None = None, shift: np.ndarray | None = None):
     """For a drawer region: a function of the object's body xy giving how many cells of its
     footprint (a rounded box, 4 mm margin) lie over a wall or under an overhang (anything
     struck by a ray from above higher than 2 cm over the drawer floor). Heights are ray-cast
-    once on a 5 mm grid."""
+    once on a 5 mm grid. `size`/`shift`: a turned footprint (default: the object's box); with
+    them the grid also covers the shifted footprint, its cells 1 cm off the region count, and
+    so do the cells under the hand's housing (`HOUSING_HALF`) off the region where something
+    stands higher than `HOUSING_Z` over the floor."""
     floor = s.support_top(centre, 0.01, {obj}, below=top)
     box = s.box(obj)
-    edge = 0.5 * box.size[:2] + 0.004
-    shift = box.centre[:2] - s.env.object_pose(obj)[0][:2]
+    edge = 0.5 * (box.size[:2] if size is None else size) + 0.004
+    turned = shift is not None
+    if not turned:
+        shift = box.centre[:2] - s.env.object_pose(obj)[0][:2]
+    margin = edge + (np.abs(shift) if turned else 0.0)
     step = 0.005
-    xs = np.arange(centre[0] - half[0] - edge[0], centre[0] + half[0] + edge[0] + step, step)
-    ys = np.arange(centre[1] - half[1] - edge[1], centre[1] + half[1] + edge[1] + step, step)
-    hit = np.array([[(h := s.env.ray_down(np.array([x, y]), top + 0.5, floor, ignore=obj)) is not None
-                     and h > floor + 0.02 for y in ys] for x in xs])
+    xs = np.arange(centre[0] - half[0] - margin[0], centre[0] + half[0] + margin[0] + step, step)
+    ys = np.arange(centre[1] - half[1] - margin[1], centre[1] + half[1] + margin[1] + step, step)
+    heights = np.array([[np.nan if (h := s.env.ray_down(np.array([x, y]), top + 0.5, floor, ignore=obj)) is None
+                         else h for y in ys] for x in xs])
+    hit = heights > floor + 0.02  # (nan: nothing above the floor there)
     gx, gy = np.meshgrid(xs, ys, indexing="ij")
     # the drawer's own walls are thinner than the grid step: mark them from their boxes
     for b in s.env.joint_part_boxes(joint):
         if b[1, 2] > floor + 0.02:
             hit |= (gx >= b[0, 0] - step / 2) & (gx <= b[1, 0] + step / 2) & (gy >= b[0, 1] - step / 2) & (gy <= b[1, 1] + step / 2)
+    high = None
+    if turned:
+        # the housing over a long object held across its middle (its short side: the closing axis)
+        housing = HOUSING_HALF if size[0] > size[1] else HOUSING_HALF[::-1]
+        high = (heights > floor + HOUSING_Z) & ((np.abs(gx - centre[0]) > half[0]) | (np.abs(gy - centre[1]) > half[1]))
+        # off the drawer: over the table or the cabinet, not in it
+        hit |= (np.abs(gx - centre[0]) > half[0] + 0.01) | (np.abs(gy - centre[1]) > half[1] + 0.01)
 
     def blocked(p: np.ndarray) -> int:
         c = p + shift
         inside = ((gx - c[0]) / edge[0]) ** 4 + ((gy - c[1]) / edge[1]) ** 4 <= 1.0
-        return int(np.count_nonzero(hit & inside))
+        n = int(np.count_nonzero(hit & inside))
+        if high is not None:
+            n += int(np.count_nonzero(high & (np.abs(gx - c[0]) <= housing[0]) & (np.abs(gy - c[1]) <= housing[1])))
+        return n
 
     return blocked
 
@@ -218,10 +286,11 @@ def destination(ctx: Ctx, obj: str, target: str) -> np.ndarray:
     """(x, y, support top) where the object's body should come to rest (no noise)."""
     s = ctx.scene
     box = s.box(obj)
-    dest = place_xy(ctx, obj, target)
-    foot = dest + (box.centre[:2] - s.env.object_pose(obj)[0][:2])
+    dest, _, turn = _place_choice(ctx, obj, target)
+    size, shift = (box.size[:2], box.centre[:2] - s.env.object_pose(obj)[0][:2]) if turn == 0 else _turned_foot(s, obj, turn)
+    foot = dest + shift
     below = support_ceiling(s.env, target)
-    radius = 0.6 * float(min(box.size[0], box.size[1])) / 2
+    radius = 0.6 * float(min(size[0], size[1])) / 2
     return np.array([dest[0], dest[1], s.support_top(foot, radius, {obj}, below=below)])
 
 
@@ -253,7 +322,13 @@ def place(ctx: Ctx, obj: str, target: str, stand: bool = False) -> Plan:
         # from the open side, not lowered onto the board above
         yield from slide_in.slide_in(ctx, obj, comp)
         return
-    yield from place_at(ctx, obj, place_xy(ctx, obj, target), support_ceiling(ctx.scene.env, target), stand=stand)
+    from pipeline.policies.scripted import lay_down  # builds on this module's `place_at`
+
+    if lay_down.too_tall(ctx, obj, target):  # it would stand too high in a shallow drawer
+        yield from lay_down.stand_and_tip(ctx, obj, target)
+        return
+    xy, _, turn = _place_choice(ctx, obj, target)
+    yield from place_at(ctx, obj, xy, support_ceiling(ctx.scene.env, target), stand=stand, turn=turn)
 
 
 def upright_hold(s: Scene, obj: str) -> tuple[np.ndarray, float] | None:
@@ -273,12 +348,14 @@ def upright_hold(s: Scene, obj: str) -> tuple[np.ndarray, float] | None:
     return upright @ g, float(g[2] - boxes[:, 0, 2].min())
 
 
-def place_at(ctx: Ctx, obj: str, xy: np.ndarray, below: float = np.inf, stand: bool = False) -> Plan:
+def place_at(ctx: Ctx, obj: str, xy: np.ndarray, below: float = np.inf, stand: bool = False,
+             turn: float = 0.0) -> Plan:
     """Carry the held object so its body comes down at `xy` on whatever supports it there
     (ignoring boxes whose top is at or above `below`), release, retreat. `stand`: an
     upright object that tilted in the hand is lowered as if it stood upright, so its low
     edge meets the support first and the pressing turns it upright in the fingers before
-    they open (released tilted, a pot falls over)."""
+    they open (released tilted, a pot falls over). `turn` (rad): the hand turns the object
+    about the vertical on the way (a long object along a drawer)."""
     s = ctx.scene
     env = s.env
     eef = s.eef()
@@ -291,18 +368,24 @@ def place_at(ctx: Ctx, obj: str, xy: np.ndarray, below: float = np.inf, stand: b
     if up is not None:  # down to just above the support: the low edge presses it upright
         hold, bottom = up
         gap = STAND_GAP
-    radius = 0.6 * float(min(box.size[0], box.size[1])) / 2
+    c, sn = np.cos(turn), np.sin(turn)
+    hold[:2] = np.array([[c, -sn], [sn, c]]) @ hold[:2]  # (turned with the hand about the grip site)
+    size, shift = (box.size[:2], box.centre[:2] - body[:2]) if turn == 0 else _turned_foot(s, obj, turn)
+    radius = 0.6 * float(min(size[0], size[1])) / 2
     offset_xy = ctx.noise.place_offset()[:2]
     dest = np.asarray(xy, dtype=float)[:2] + offset_xy
-    foot = dest + (box.centre[:2] - body[:2])
+    foot = dest + shift
     support = s.support_top(foot, radius, {obj}, below=below)
     offset_z = abs(ctx.noise.place_offset()[2])
     ctx.note(place_offset=[offset_xy[0], offset_xy[1], offset_z])
     release_z = support + gap + bottom + offset_z
     lift_z = s.path_clearance(box.centre, foot, radius, {obj}) + CARRY_CLEARANCE + max(bottom, carry_bottom)
     goal = np.array([dest[0] + hold[0], dest[1] + hold[1], release_z])
-    yaw = ctx.yaw_hold
+    yaw = ctx.yaw_hold + turn
     yield from travel(ctx, goal, yaw, 1.0, max(lift_z, release_z + 0.05))
+    if turn != 0:  # finish turning before going down (the hand turns slower than it travels)
+        ctx.yaw_hold = yaw  # the release and retreat keep the turned yaw
+        yield ctx.move(s.eef(), gripper=1.0, yaw=yaw, tol=0.02, rot_tol=0.05, max_steps=30, label="turn")
     if not carried(s, obj):
         ctx.events.append(f"dropped:{obj}")
         if ctx.truth is not None:

@@ -2,7 +2,9 @@
 
 Attempt k > 0 grasps differently: the k-th best grasp candidate (another yaw or rim side,
 for side-lying bottles and mugs as for upright ones), approached from higher up, with the
-retry shift of `variation.RetryNoise`. The planner calls it again from the live state.
+retry shift of `variation.RetryNoise`. A book that leans or lies tilted is picked up by its
+top edge with a tilted hand and turned upright in the hand (stand_book.py). The planner
+calls it again from the live state.
 """
 
 from __future__ import annotations
@@ -10,6 +12,7 @@ from __future__ import annotations
 from pipeline.policies.scripted.grasps import plan_grasp
 from pipeline.policies.scripted.recovery import checks
 from pipeline.policies.scripted.recovery.long_grasp import lying_long, slide_clear
+from pipeline.policies.scripted.recovery.stand_book import quarter_turn, stand_tilt, stand_up, too_steep
 from pipeline.policies.scripted.stack import carried
 from pipeline.policies.scripted.skills import (Ctx, Plan, box_centre_offset, destination, free_hand, grasp, place,
                                               place_at, place_xy, support_ceiling)
@@ -22,12 +25,21 @@ def pick_place_once(ctx: Ctx, conjunct: tuple[str, ...], attempt: int) -> Plan:
     s = ctx.scene
     ctx.begin("pick_place", conjunct, obj, target)
     if not carried(s, obj, checks.held(s)):
-        yield from free_hand(ctx)
-        dest = destination(ctx, obj, target)
-        # a candidate whose fingers land clear of other objects (they would be clamped too)
-        choice = checks.clear_grasp_choice(s, obj, dest, attempt)
-        yield from grasp(ctx, obj, dest, choice=choice, g=slide_clear(s, obj, plan_grasp(s, obj, dest, choice)),
-                         hover_m=0.08 + 0.03 * min(attempt, 2), turn_tol=TURN_TOL)
+        book = stand_tilt(s, obj)
+        if book is not None and too_steep(book):
+            yield from quarter_turn(ctx, obj, book)  # nearer standing: the next attempt goes on
+            if ctx.truth is not None:
+                ctx.truth.end_hand(obj, False)
+            return
+        if book is not None:
+            yield from stand_up(ctx, obj, book)
+        else:
+            yield from free_hand(ctx)
+            dest = destination(ctx, obj, target)
+            # a candidate whose fingers land clear of other objects (they would be clamped too)
+            choice = checks.clear_grasp_choice(s, obj, dest, attempt)
+            yield from grasp(ctx, obj, dest, choice=choice, g=slide_clear(s, obj, plan_grasp(s, obj, dest, choice)),
+                             hover_m=0.08 + 0.03 * min(attempt, 2), turn_tol=TURN_TOL)
         if not carried(s, obj, checks.held(s)):
             ctx.events.append(f"missed_grasp:{obj}")
             if ctx.truth is not None:

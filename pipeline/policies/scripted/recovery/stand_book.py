@@ -1,0 +1,247 @@
+"""Skill: pick up a book that leans or lies tilted (not standing on its bottom edge) so that
+it hangs upright in the hand, ready for the slot skill (slot.py).
+
+Input: a `Ctx` and an object `obj` that is a book (`book_axes`: a thin slab whose body
+origin lies on one of its edges, its bottom: LIBERO's `In` tests that origin) whose up axis
+is tilted from vertical. Output: primitives that
+1. tilt the open hand so it points down the book's up axis, fingers closing across its
+   thickness, above the middle of its top edge;
+2. go down along that axis and close on the top edge (as deep as a standing book's grasp,
+   `grasps.SLAB_GRIP_BELOW_TOP`);
+3. lift, and turn the hand back to pointing straight down: the book turns with it and hangs
+   upright, held near its top edge like a standing book grasped from above.
+A top-down grasp cannot hold such a book: every horizontal width of a leaning book is wider
+than the open fingers, and a rim grasp slips off its faces (measured: 4 of 4 missed).
+The hand turns at most `MAX_TILT` from pointing down (a hand pointing level, low over the
+table, is out of the wrist's range: measured 25 deg short). A book tilted further (lying on
+its side, or standing on its top edge, upside down: its origin then cannot get into a
+compartment) is turned by a quarter at a time: `quarter_turn` holds it by a top corner with
+the hand pitched 45 deg along the book's plane, lifts it, pitches the hand 45 deg the other
+way, sets it down where it was and lets go. Upside down takes two quarters, then the book
+stands and is grasped from above as usual.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from pipeline.policies.scripted.grasps import SLAB_GRIP_BELOW_TOP, SLAB_RATIO, SLAB_THIN_M
+from pipeline.policies.scripted.primitives import Grip, axis_angle_matrix, hand_orientation, rotation_error
+from pipeline.policies.scripted.scene import Scene
+from pipeline.policies.scripted.skills import HAND_CLEARANCE, Ctx, Plan, travel
+
+UPRIGHT_DEG = 20.0  # up axis within this of vertical: standing, grasped from above as usual
+MAX_TILT = np.radians(75.0)  # most the hand is tilted from pointing down (further: out of reach)
+FACE_UP = 0.6  # faces' normal more vertical than this (sine of its elevation): lying on its face
+BOTTOM_FRAC = 0.1  # the origin lies within this fraction of the height from one end: a book
+BACK_OFF_M = 0.09  # grip site this far up the book's axis from the grasp before going in
+LIFT_M = 0.12  # lift after closing, before the hand turns
+SETTLE_STEPS = 10  # the book swings on in the fingers this long after the hand stopped turning
+TILT_STEPS = 60
+REACH_TOL = 0.1  # radians off the tilted orientation after TILT_STEPS: out of reach
+STEEP = np.radians(65.0)  # hand tilts beyond this are made TURN_ABOVE_M above the start point
+TURN_ABOVE_M = 0.15
+TURN_CLEAR_M = 0.05  # lowest corner above the table while the book turns
+PITCH = np.radians(45.0)  # hand pitch either way for a quarter turn
+CORNER_DEPTH_M = 0.03  # grip site inside the corner along the hand's axis
+PUT_DOWN_GAP = 0.008  # book's lowest point above the table when it is let go
+
+
+@dataclass(frozen=True)
+class BookAxes:
+    up: np.ndarray  # world unit vector from the bottom edge (body origin) to the top edge
+    thin: np.ndarray  # world unit normal of its faces
+    top_mid: np.ndarray  # world point: middle of the top edge, mid-thickness
+    long: np.ndarray  # world unit vector along its bottom edge
+    ends: tuple[np.ndarray, np.ndarray]  # world points: middles of the two ends along `long`
+
+
+def book_axes(scene: Scene, obj: str) -> BookAxes | None:
+    """A book's axes from its collision boxes in its body frame, or None when `obj` is not
+    book-shaped (a thin slab, long, whose body origin lies at one end of a long side)."""
+    env = scene.env
+    bid = env.env.obj_body_id[obj]
+    pos = np.array(env.env.sim.data.body_xpos[bid])
+    rot = np.array(env.env.sim.data.body_xmat[bid]).reshape(3, 3)
+    local = (env.object_corners(obj) - pos) @ rot  # corners in the body frame
+    lo, hi = local.min(axis=0), local.max(axis=0)
+    size = hi - lo
+    t = int(np.argmin(size))
+    others = [i for i in range(3) if i != t]
+    if size[t] >= SLAB_THIN_M or min(size[others]) < SLAB_RATIO * size[t]:
+        return None
+    # the up axis: the one along which the origin sits at an end (a book's bottom)
+    ends = {i: min(abs(lo[i]), abs(hi[i])) / size[i] for i in others}
+    u = min(ends, key=ends.get)
+    if ends[u] > BOTTOM_FRAC:
+        return None
+    sign = 1.0 if abs(lo[u]) < abs(hi[u]) else -1.0
+    centre = (lo + hi) / 2
+    mid = centre.copy()
+    mid[u] = hi[u] if sign > 0 else lo[u]
+    w = next(i for i in others if i != u)
+    a, b = centre.copy(), centre.copy()
+    a[w], b[w] = lo[w], hi[w]
+    return BookAxes(up=rot[:, u] * sign, thin=rot[:, t], top_mid=pos + rot @ mid, long=rot[:, w],
+                    ends=(pos + rot @ a, pos + rot @ b))
+
+
+def stand_tilt(scene: Scene, obj: str) -> BookAxes | None:
+    """The book's axes when it is a book tilted out of standing (tilt over UPRIGHT_DEG);
+    None otherwise. `too_steep` says whether it must first be turned by a quarter."""
+    ax = book_axes(scene, obj)
+    if ax is None or abs(float(ax.thin[2])) > FACE_UP:
+        return None  # lying on its face: no edge a hand can close across is up
+    return ax if _tilt(ax.up) > np.radians(UPRIGHT_DEG) else None
+
+
+def too_steep(ax: BookAxes) -> bool:
+    return _tilt(ax.up) > MAX_TILT
+
+
+def _tilt(up: np.ndarray) -> float:
+    return float(np.arccos(np.clip(up[2], -1.0, 1.0)))
+
+
+def _yaw_of(closing: np.ndarray) -> float:
+    """Top-down hand yaw whose closing axis (R_z(yaw) y) is the horizontal `closing`."""
+    return float(np.arctan2(-closing[0], closing[1]))
+
+
+def tilted_grasp(ax: BookAxes) -> tuple[float, np.ndarray]:
+    """(yaw, approach) of a hand pointing along -up (the `up` given), closing
+    across the faces. `hand_orientation(yaw, approach)` is the top-down hand at `yaw` turned
+    about the horizontal axis cross(-z, approach); its closing axis must then be `thin`."""
+    a = -ax.up
+    down = np.array([0.0, 0.0, -1.0])
+    h = np.cross(down, a)
+    angle = float(np.arccos(np.clip(a @ down, -1.0, 1.0)))
+    turn = axis_angle_matrix(h, angle) if np.linalg.norm(h) > 1e-6 else np.eye(3)
+    # the fingers are symmetric: of the two ways round, the one nearer the wrist's middle.
+    # Turning back to top-down undoes `turn`: the closing axis returns to c0, the yaw stays
+    yaw = min((_yaw_of(turn.T @ (sg * ax.thin)) for sg in (1.0, -1.0)), key=abs)
+    return yaw, a
+
+
+def stand_up(ctx: Ctx, obj: str, ax: BookAxes) -> Plan:
+    yield from _edge_grasp_turn(ctx, obj, ax)
+    # the book swings on in the fingers for a few steps after the hand stopped turning; the
+    # slot skill measures its footprint next
+    yield Grip(1.0, SETTLE_STEPS, label="settle")
+
+
+def quarter_turn(ctx: Ctx, obj: str, ax: BookAxes) -> Plan:
+    """Turn the book by a quarter in its own plane toward standing: hold it by a top corner
+    with the hand pitched PITCH one way along its plane, lift, pitch the hand as far the
+    other way, set it down where it was, let go."""
+    s = ctx.scene
+    side = np.cross(ax.thin, ax.up)
+    corners = _plane_corners(ax)
+    m = np.cross(ax.thin, [0.0, 0.0, 1.0])  # the horizontal direction in the book's plane
+    m /= max(float(np.linalg.norm(m)), 1e-6)
+    down = np.array([0.0, 0.0, -1.0])
+    best = None
+    for sg in (1.0, -1.0):  # pitch the hand toward +m, then toward -m; or the other way
+        a1 = np.cos(PITCH) * down + np.sin(PITCH) * m * sg
+        a2 = np.cos(PITCH) * down - np.sin(PITCH) * m * sg
+        turn = axis_angle_matrix(np.cross(a1, a2), 2 * PITCH)
+        gain = float((turn @ ax.up)[2] - ax.up[2])  # how much nearer standing it gets
+        if best is None or gain > best[0]:
+            best = (gain, a1, a2)
+    _, a1, a2 = best
+    corner = max(corners, key=lambda p: float(-a1 @ p))  # the one the hand comes to first
+    grip = corner + a1 * CORNER_DEPTH_M
+    held = BookAxes(up=-a1, thin=ax.thin, top_mid=grip + (-a1) * SLAB_GRIP_BELOW_TOP, long=side, ends=ax.ends)
+    # held by a corner, the book swings through up to its diagonal below the fingers: lift it
+    # that far clear of the table
+    reach = max(float(np.linalg.norm(c - grip)) for c in corners)
+    lift = reach + TURN_CLEAR_M - (grip[2] - s.table_height())
+    was = s.box(obj).centre[:2]  # a free spot: the book stood there
+    yield from _edge_grasp_turn(ctx, obj, held, lift=max(lift, 0.04), to=a2, rot_tol=0.06)
+    yield Grip(1.0, SETTLE_STEPS // 2, label="settle")
+    box = s.box(obj)
+    gap = box.lo[2] - s.support_top(was, 0.01, {obj})
+    # turning about the grip site carried the book aside: back over where it was
+    down = s.eef() + [*(was - box.centre[:2]), -max(gap - PUT_DOWN_GAP, 0.0)]
+    yaw2 = ctx.yaw_hold
+    ctx.approach_hold = a2
+    try:
+        yield ctx.move(down, gripper=1.0, speed=0.5, yaw=yaw2, approach=a2, tol=0.008, max_steps=35,
+                       label="put_down")
+        yield Grip(-1.0, ctx.open_steps, label="open")
+        yield ctx.move(s.eef() - a2 * 0.04, yaw=yaw2, approach=a2, tol=0.015, max_steps=12, label="back_off")
+    finally:
+        ctx.approach_hold = None
+    yield ctx.move(s.eef() + [0.0, 0.0, 0.05], yaw=yaw2, tol=0.03, max_steps=15, label="retreat")
+    if abs(yaw2) > np.pi / 2 + 0.3:
+        # the hand was turned half about its axis (out of range the other way): turn it back
+        # up here, or the next grasp turns the wrist on its way down and knocks the book over
+        # (measured)
+        ctx.yaw_hold = yaw2 - np.pi if yaw2 > 0 else yaw2 + np.pi
+        yield ctx.move(s.eef() + [0.0, 0.0, 0.04], yaw=ctx.yaw_hold, tol=0.03, rot_tol=0.1, max_steps=40,
+                       label="unwind")
+
+
+def _rot_off(s: Scene, yaw: float, approach: np.ndarray | None) -> float:
+    """Radians between the hand's orientation now and the one asked for."""
+    return float(np.linalg.norm(rotation_error(hand_orientation(yaw, approach), s.env.eef_pose()[1])))
+
+
+def _plane_corners(ax: BookAxes) -> list[np.ndarray]:
+    """The book's four corners in its mid-plane (world)."""
+    side = np.cross(ax.thin, ax.up)
+    half = 0.5 * float(np.linalg.norm(ax.ends[1] - ax.ends[0]))
+    centre_top = ax.top_mid
+    centre_bottom = (ax.ends[0] + ax.ends[1]) - centre_top  # ends' mean is the centre
+    return [c + side * s * half for c in (centre_top, centre_bottom) for s in (-1.0, 1.0)]
+
+
+def _edge_grasp_turn(ctx: Ctx, obj: str, ax: BookAxes, lift: float = LIFT_M, to: np.ndarray | None = None,
+                     rot_tol: float = 0.03) -> Plan:
+    """Grasp the edge at `ax.top_mid` with the hand pointing along -`ax.up`, lift, turn the
+    hand down (`ax.up` then points up), or to point along `to`."""
+    s = ctx.scene
+    yaw, approach = tilted_grasp(ax)
+    grip = ax.top_mid - ax.up * SLAB_GRIP_BELOW_TOP
+    start = grip + ax.up * BACK_OFF_M
+    ctx.note(stand_book=True)
+    if not s.gripper_open():
+        yield Grip(-1.0, ctx.open_steps + 4, label="release")
+    # the book itself counts: the hand must not sweep it over on the way (measured)
+    lift_z = s.path_clearance(s.eef(), start, 0.06, set()) + HAND_CLEARANCE
+    steep = _tilt(ax.up) > STEEP
+    ctx.yaw_hold, ctx.approach_hold = yaw, approach  # Grip primitives hold this orientation
+    try:
+        # over the start point with the hand pointing down, then tilted there (turning it on
+        # the way over took as long, and went wrong where the tilt is out of reach)
+        yield from travel(ctx, start, yaw, -1.0, max(lift_z, start[2] + (TURN_ABOVE_M if steep else 0.0)))
+        if steep:  # turn the hand up high first: turning it while going down
+            # a long way, the controller lets the hand drift up and away (measured)
+            yield ctx.move(start + [0.0, 0.0, TURN_ABOVE_M], yaw=yaw, approach=approach, tol=0.01, rot_tol=0.04,
+                           max_steps=100, label="tilt")
+        yield ctx.move(start, yaw=yaw, approach=approach, tol=0.006, rot_tol=rot_tol, max_steps=TILT_STEPS,
+                       label="tilt")
+        if _rot_off(s, yaw, approach) > REACH_TOL:
+            # out of the wrist's range this way round (which way is, depends on where the book
+            # lies: measured both ways): the hand turned by half a turn about its axis, same grasp
+            yaw = yaw - np.pi if yaw > 0 else yaw + np.pi
+            ctx.yaw_hold = yaw
+            yield ctx.move(start, yaw=yaw, approach=approach, tol=0.006, rot_tol=rot_tol, max_steps=TILT_STEPS,
+                           label="tilt")
+        yield ctx.move(grip, speed=0.3, yaw=yaw, approach=approach, tol=0.006, max_steps=80, label="edge")
+        yield Grip(1.0, ctx.close_steps, label="close")
+        up = s.eef() + [0.0, 0.0, lift]
+        yield ctx.move(up, gripper=1.0, speed=0.6, yaw=yaw, approach=approach, tol=0.02, max_steps=50,
+                       label="pick_lift")
+    finally:
+        ctx.approach_hold = None
+    if to is not None:
+        # the pitch about the closing axis undone and redone the other way: same yaw
+        ctx.approach_hold = to
+        yield ctx.move(s.eef(), gripper=1.0, yaw=yaw, approach=to, tol=0.03, rot_tol=0.06, max_steps=90,
+                       label="turn")
+        ctx.approach_hold = None
+        return
+    yield ctx.move(s.eef(), gripper=1.0, yaw=yaw, tol=0.03, rot_tol=0.06, max_steps=80, label="upright")
