@@ -56,6 +56,22 @@ def test_an_obstruction_on_the_placement_path_is_moved_aside_first(bowl_on_plate
     assert result.success and not on_plate(env, "cream_cheese_1")
 
 
+def test_a_grasp_whose_finger_lands_on_a_neighbour_is_passed_over_for_a_clear_one(bowl_on_plate):
+    from pipeline.policies.scripted.grasps import FINGER_REACH, closing_axis, plan_grasp
+
+    task, env = bowl_on_plate
+    start(env)
+    s = Scene(env)
+    g = plan_grasp(s, "akita_black_bowl_1", None, 0)
+    outer = g.pos + closing_axis(g.yaw) * FINGER_REACH  # (a rim grasp: the finger outside the rim)
+    if np.linalg.norm(outer[:2] - s.box("akita_black_bowl_1").centre[:2]) < 0.03:
+        outer = g.pos - closing_axis(g.yaw) * FINGER_REACH
+    set_pose(env, "wine_bottle_1", [outer[0], outer[1], s.table_height() + 0.01])  # upright, tall
+    assert "wine_bottle_1" in checks.tip_blockers(s, "akita_black_bowl_1", g, set())
+    k = checks.clear_grasp_choice(s, "akita_black_bowl_1", None, 0)
+    assert checks.tip_blockers(s, "akita_black_bowl_1", plan_grasp(s, "akita_black_bowl_1", None, k), set()) == []
+
+
 def test_a_goal_object_off_the_table_stops_with_object_off_table(bowl_on_plate):
     task, env = bowl_on_plate
     start(env)

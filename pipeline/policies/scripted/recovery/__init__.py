@@ -7,9 +7,10 @@ every skill; when it cannot, it stops with a `GiveUpReason`.
     policy.reset(task, seed); run_episode(env, policy, ...)
     policy.give_up_reason  # None, or why it stopped (see also `reason_after(success)`)
 
-Skills, one per file: `pick_place` (pose-aware grasp, different on retry), `stand_book` (a
-leaning book picked up by its top edge with a tilted hand and turned upright in the hand; an
-upside-down or side-lying one turned a quarter at a time first), `operate`
+Skills, one per file: `pick_place` (pose-aware grasp, different on retry, fingers clear of
+neighbours; `long_grasp` slides a lying long object's grasp clear of the palm), `stand_book`
+(a leaning book picked up by its top edge with a tilted hand and turned upright in the hand;
+an upside-down or side-lying one turned a quarter at a time first), `operate`
 (drawers, doors, knobs), `put_aside`, `back_out`, and the shared `scripted.insert` (into a
 roofed container through its door, e.g. a mug into the microwave); `checks` reads the
 scene; `planner` decides; `expert` is the `Policy`.

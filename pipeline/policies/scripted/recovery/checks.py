@@ -167,6 +167,47 @@ def grasp_blockers(scene: Scene, obj: str, grasp, keep: set[str], half_width: fl
     return out
 
 
+def tip_blockers(scene: Scene, obj: str, grasp, keep: set[str]) -> list[str]:
+    """Movable objects in an open finger's way when grasping `obj` with `grasp`: under a
+    fingertip (~4.7 cm either way along the closing axis) or between it and the object,
+    higher than the tips (~1 cm below the grip site). The hand closes on them too
+    (measured: a lying bottle grasped beside a bowl came up with the bowl clamped to it; a
+    bowl's rim grasp beside the bottle's neck took the bottle along)."""
+    from pipeline.policies.scripted.grasps import FINGER_REACH, closing_axis
+
+    ax = closing_axis(grasp.yaw)
+    tip_z = grasp.pos[2] - 0.012
+    top = max(tip_z, scene.box(obj).hi[2]) + 0.4
+    side = np.array([-ax[1], ax[0], 0.0])
+    hits = []
+    for sg in (-1, 1):
+        for r in (FINGER_REACH, 0.036, 0.026):
+            for t in (-0.01, 0.0, 0.01):  # a finger is ~2 cm wide
+                p = grasp.pos + sg * ax * r + t * side
+                if scene.env.ray_down(p[:2], top, tip_z + 0.005, ignore=obj) is not None:
+                    hits.append(p)
+    out = []
+    for o in scene.env.object_names:
+        if o == obj or o in keep:
+            continue
+        b = scene.box(o)
+        if b.hi[2] > tip_z + 0.005 and any(np.all(b.lo[:2] - 0.004 <= p[:2]) and np.all(p[:2] <= b.hi[:2] + 0.004)
+                                           for p in hits):
+            out.append(o)
+    return out
+
+
+def clear_grasp_choice(scene: Scene, obj: str, dest: np.ndarray | None, start: int, tries: int = 6) -> int:
+    """The first grasp candidate from `start` on whose fingers touch no other object (see
+    `tip_blockers`), or `start` when every one does."""
+    from pipeline.policies.scripted.grasps import plan_grasp
+
+    for k in range(start, start + tries):
+        if not tip_blockers(scene, obj, plan_grasp(scene, obj, dest, k), set()):
+            return k
+    return start
+
+
 def drawer_sweep(scene: Scene, joint: str) -> np.ndarray | None:
     """(2, 3) box the drawer of a slide `joint` covers from now until fully open, or None
     for a hinge."""
@@ -218,6 +259,15 @@ def proud_in_drawer(scene: Scene, joint: str, margin: float = 0.01) -> list[str]
         if inside and b.hi[2] > hi[2] + margin:
             out.append(o)
     return out
+
+
+def in_part(scene: Scene, obj: str, joint: str) -> bool:
+    """`obj` stands in (or on) the part a joint moves: its centre over the part's boxes and
+    its bottom no lower than the part's floor (it moves with the part)."""
+    boxes = scene.env.joint_part_boxes(joint)
+    lo, hi = boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0)
+    b = scene.box(obj)
+    return bool(np.all(b.centre[:2] > lo[:2]) and np.all(b.centre[:2] < hi[:2]) and b.lo[2] > lo[2] - 0.02)
 
 
 def under_sweep(scene: Scene, obj: str, sweep: np.ndarray, margin: float = 0.05) -> bool:

@@ -117,6 +117,10 @@ def recover(ctx: Ctx, now: Callable[[], int], budget: int | None) -> Plan:
             if tries[sub] > 0 or s.box(sub[1]).size[2] < FLAT_M:
                 g = plan_grasp(s, sub[1], dest, tries[sub])
                 in_way += checks.grasp_blockers(s, sub[1], g, keep, checks.PALM_HALF_M if tries[sub] > 0 else 0.0)
+            # whatever an open fingertip would land on: the hand closes on it too
+            # (another grasp candidate first, see pick_place_once; aside if none is clear)
+            k = checks.clear_grasp_choice(s, sub[1], dest, tries[sub])
+            in_way += checks.tip_blockers(s, sub[1], plan_grasp(s, sub[1], dest, k), keep)
             block = [b for b in in_way if aside[b] < MAX_ASIDE]
             if block:
                 _debug("aside", block)
@@ -128,7 +132,14 @@ def recover(ctx: Ctx, now: Callable[[], int], budget: int | None) -> Plan:
                 and articulated.is_closed_enough(s.env, sub[1])):  # (an open one only goes a little further)
             # an object the opened drawer would overhang cannot be grasped afterwards: first aside
             sweep = checks.drawer_sweep(s, joint)
-            under = [m for m in movers if sweep is not None and checks.under_sweep(s, m, sweep) and aside[m] < MAX_ASIDE]
+            # ... and any other loose object the drawer front (or the hand at its handle) would
+            # run into: it jams the drawer and the hand pushes it about (a bowl on the table
+            # in front of a bottom drawer); objects riding in the drawer itself go with it
+            # (only what reaches up into the drawer's height: one below a high drawer is not hit)
+            loose = [o for o in s.env.object_names if o not in keep and o not in movers
+                     and not checks.in_part(s, o, joint) and sweep is not None and s.box(o).hi[2] > sweep[0, 2]]
+            under = [m for m in movers + loose
+                     if sweep is not None and checks.under_sweep(s, m, sweep) and aside[m] < MAX_ASIDE]
             if under:
                 _debug("aside before opening", under)
                 aside[under[0]] += 1

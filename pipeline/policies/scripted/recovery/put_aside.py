@@ -36,7 +36,8 @@ def put_aside(ctx: Ctx, obj: str, attempt: int = 0, forbid: list[np.ndarray] = (
     s = ctx.scene
     if checks.held(s) != obj:
         yield from free_hand(ctx)
-        yield from grasp(ctx, obj, None, choice=attempt, hover_m=0.08 + 0.03 * min(attempt, 2), top_hold=True)
+        yield from grasp(ctx, obj, None, choice=checks.clear_grasp_choice(s, obj, None, attempt),
+                         hover_m=0.08 + 0.03 * min(attempt, 2), top_hold=True)
         if checks.held(s) != obj:
             return
     spot = checks.free_spot(s, obj, goal_points(ctx, obj), forbid, corridor_m=HAND_REACH_M)
