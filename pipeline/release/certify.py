@@ -28,7 +28,7 @@ from pipeline.release.scene_physics import scene_task
 from pipeline.sim import SimEnv
 
 # bump when the experts change so cached certificates of an older expert are not reused
-EXPERT_VERSION = {"plain": 2, "recovery": 3}
+EXPERT_VERSION = {"plain": 3, "recovery": 4}
 
 
 @dataclass(frozen=True)

@@ -295,8 +295,10 @@ def destination(ctx: Ctx, obj: str, target: str) -> np.ndarray:
     return np.array([dest[0], dest[1], s.support_top(foot, radius, {obj}, below=below)])
 
 
-def place(ctx: Ctx, obj: str, target: str, stand: bool = False) -> Plan:
-    """`stand`: see `place_at` (the recovery expert)."""
+def place(ctx: Ctx, obj: str, target: str, stand: bool = False, shift: np.ndarray | None = None) -> Plan:
+    """`stand`: see `place_at` (the recovery expert). `shift`: xy subtracted from the spot of a
+    plain placement (the recovery expert centres a lying long object's length on the region;
+    the own-way placements above, shelves, slots, a pan slid in, are not shifted)."""
     # a book into a narrow compartment or a roofed shelf goes in its own way (slot.py,
     # shelf.py, tip_push.py; imported here because they build on this module's `travel`)
     from pipeline.policies.scripted.shelf import open_side, shelf_opening, slide_into_shelf
@@ -329,6 +331,8 @@ def place(ctx: Ctx, obj: str, target: str, stand: bool = False) -> Plan:
         yield from lay_down.stand_and_tip(ctx, obj, target)
         return
     xy, _, turn = _place_choice(ctx, obj, target)
+    if shift is not None:
+        xy = xy - shift
     yield from place_at(ctx, obj, xy, support_ceiling(ctx.scene.env, target), stand=stand, turn=turn)
 
 

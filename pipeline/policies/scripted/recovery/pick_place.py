@@ -15,8 +15,7 @@ from pipeline.policies.scripted.recovery.long_grasp import lying_long, slide_cle
 from pipeline.policies.scripted.recovery.lying_cup import grasp_by_handle, lying_handle_grasp, place_by_handle
 from pipeline.policies.scripted.recovery.stand_book import quarter_turn, stand_tilt, stand_up, too_steep
 from pipeline.policies.scripted.stack import carried
-from pipeline.policies.scripted.skills import (Ctx, Plan, box_centre_offset, destination, free_hand, grasp, place,
-                                              place_at, place_xy, support_ceiling)
+from pipeline.policies.scripted.skills import Ctx, Plan, box_centre_offset, destination, free_hand, grasp, place
 
 TURN_TOL = 0.15  # radians of yaw still to turn at which the hand may go down to grasp
 
@@ -57,9 +56,8 @@ def pick_place_once(ctx: Ctx, conjunct: tuple[str, ...], attempt: int) -> Plan:
     elif lying_long(s, obj) and s.env.is_region(target) and not s.env.region(target)["joints"]:
         # its body origin is at one end (a bottle's base): centre its length on the region
         # instead, or most of it hangs past one end and it slides off (measured: a bottle
-        # laid on the rack by its base fell off behind it)
-        xy = place_xy(ctx, obj, target) - box_centre_offset(s, obj)
-        yield from place_at(ctx, obj, xy, support_ceiling(s.env, target))
+        # laid on the rack by its base fell off behind it); a pan slid onto a shelf keeps its way
+        yield from place(ctx, obj, target, shift=box_centre_offset(s, obj))
     else:
         yield from place(ctx, obj, target, stand=True)
     if ctx.truth is not None:
