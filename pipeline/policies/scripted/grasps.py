@@ -117,15 +117,11 @@ def handle_grasp(scene: Scene, obj: str) -> Grasp | None:
     return Grasp(pos=pos, yaw=yaw, rim=False)
 
 
-def plan_grasp(scene: Scene, obj: str, dest: np.ndarray | None = None, choice: int = 0,
-               top_hold: bool = False) -> Grasp:
+def plan_grasp(scene: Scene, obj: str, dest: np.ndarray | None = None, choice: int = 0) -> Grasp:
     """`dest` (x, y, support top) is where the object's body goes next: the hand must fit
     there too, so rim sides that would put the hand into a wall at the target lose.
     `choice` k > 0 takes the k-th best candidate instead of the best (a retry after a
-    failed grasp tries another yaw or rim side, not the same one again). `top_hold`: a
-    whole-object grasp no deeper than the palm clears the object's top (as a standing
-    book is held): a tall object is otherwise pressed down by the palm, and one pressed
-    off its centre topples (the recovery expert's put-aside)."""
+    failed grasp tries another yaw or rim side, not the same one again)."""
     box = scene.box(obj)
     corners = scene.env.object_corners(obj)
     centre = box.centre
@@ -142,8 +138,6 @@ def plan_grasp(scene: Scene, obj: str, dest: np.ndarray | None = None, choice: i
         z = box.lo[2] + (min(max(0.5 * h, 0.015), h - 0.02) if h > 0.03 else 0.5 * h)
         if slab:
             z = box.hi[2] - SLAB_GRIP_BELOW_TOP
-        elif top_hold:
-            z = max(z, box.hi[2] - SLAB_GRIP_BELOW_TOP)
         pos = np.array([centre[0], centre[1], max(z, floor)])
         # centre between the extreme faces along the closing axis
         pos[:2] += closing_axis(yaw)[:2] * ((mid.max() + mid.min()) / 2 - centre[:2] @ closing_axis(yaw)[:2])

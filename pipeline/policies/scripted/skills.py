@@ -83,16 +83,15 @@ def free_hand(ctx: Ctx) -> Plan:
 
 
 def grasp(ctx: Ctx, obj: str, dest: np.ndarray | None = None, choice: int = 0, hover_m: float = 0.08,
-          turn_tol: float | None = None, top_hold: bool = False, g=None) -> Plan:
+          turn_tol: float | None = None, g=None) -> Plan:
     """Reach above the object, descend, close, lift. `choice` / `hover_m`: another grasp
     candidate and a higher hover (the recovery expert's retries). `turn_tol` (radians): the
     hover also waits until the hand has turned to the grasp's yaw, so a hand still turning
     does not sweep its fingers into the object on the way down (the recovery expert; a
-    plain expert's start leaves little to turn). `top_hold`: held near its top (the
-    recovery expert's put-aside, `plan_grasp`). `g`: a `Grasp` chosen by the caller
+    plain expert's start leaves little to turn). `g`: a `Grasp` chosen by the caller
     instead (the recovery expert's, see recovery/long_grasp.py)."""
     s = ctx.scene
-    g = g if g is not None else plan_grasp(s, obj, dest, choice, top_hold)
+    g = g if g is not None else plan_grasp(s, obj, dest, choice)
     offset = ctx.noise.grasp_offset()
     ctx.note(grasp_offset=offset)
     pos = g.pos + offset

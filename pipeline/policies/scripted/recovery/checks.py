@@ -222,6 +222,9 @@ def drawer_sweep(scene: Scene, joint: str) -> np.ndarray | None:
     return np.array([np.minimum(lo, lo + shift), np.maximum(hi, hi + shift)])
 
 
+OPEN_MIN_M = 0.02  # a drawer out less than this overhangs nothing in front of the cabinet
+
+
 def overhanging_drawer(scene: Scene, obj: str, pad: float = 0.02) -> str | None:
     """The region of an open drawer that overhangs `obj` (a bowl left under the top drawer
     it was to go into), when closing the drawer would uncover it; else None. The palm comes
@@ -235,8 +238,11 @@ def overhanging_drawer(scene: Scene, obj: str, pad: float = 0.02) -> str | None:
         if not joints or scene.env.joint_frame(joints[0])["kind"] != "slide":
             continue
         fr = scene.env.joint_frame(joints[0])
-        rng = fr["range"]
-        closed_q = rng[0] if abs(rng[0]) < abs(rng[1]) else rng[1]
+        # closed is q = 0 (LIBERO's drawers slide over [-0.16, 0.01]: the range's end nearest
+        # 0 is pushed 1 cm in, and taking it for closed made every shut drawer "open")
+        closed_q = float(np.clip(0.0, *sorted(fr["range"])))
+        if abs(fr["qpos"] - closed_q) < OPEN_MIN_M:
+            continue
         boxes = scene.env.joint_part_boxes(joints[0])
         now = np.array([boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0)])
         shut = now + fr["axis"] * (closed_q - fr["qpos"])

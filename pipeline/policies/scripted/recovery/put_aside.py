@@ -36,8 +36,10 @@ def put_aside(ctx: Ctx, obj: str, attempt: int = 0, forbid: list[np.ndarray] = (
     s = ctx.scene
     if checks.held(s) != obj:
         yield from free_hand(ctx)
+        # (at the usual height, not near its top: a milk carton held by its gable stayed wedged
+        # between the open fingers and came up again with the hand: libero_10 task 1 init 1)
         yield from grasp(ctx, obj, None, choice=checks.clear_grasp_choice(s, obj, None, attempt),
-                         hover_m=0.08 + 0.03 * min(attempt, 2), top_hold=True)
+                         hover_m=0.08 + 0.03 * min(attempt, 2))
         if checks.held(s) != obj:
             return
     spot = checks.free_spot(s, obj, goal_points(ctx, obj), forbid, corridor_m=HAND_REACH_M)
