@@ -267,15 +267,6 @@ def proud_in_drawer(scene: Scene, joint: str, margin: float = 0.01) -> list[str]
     return out
 
 
-def in_part(scene: Scene, obj: str, joint: str) -> bool:
-    """`obj` stands in (or on) the part a joint moves: its centre over the part's boxes and
-    its bottom no lower than the part's floor (it moves with the part)."""
-    boxes = scene.env.joint_part_boxes(joint)
-    lo, hi = boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0)
-    b = scene.box(obj)
-    return bool(np.all(b.centre[:2] > lo[:2]) and np.all(b.centre[:2] < hi[:2]) and b.lo[2] > lo[2] - 0.02)
-
-
 def under_sweep(scene: Scene, obj: str, sweep: np.ndarray, margin: float = 0.05) -> bool:
     """The opened drawer would overhang `obj` (or the hand grasping it, `margin`)."""
     b = scene.box(obj)
