@@ -143,9 +143,14 @@ def _turned_foot(s: Scene, obj: str, turn: float) -> tuple[np.ndarray, np.ndarra
     return hi - lo, (lo + hi) / 2
 
 
-def _is_long(s: Scene, obj: str) -> bool:
+def footprint_widths(s: Scene, obj: str) -> list[float]:
+    """The object's footprint width across 36 directions of the plane (5 degrees apart)."""
     xy = s.env.object_corners(obj)[:, :2]
-    widths = [float(np.ptp(xy @ [np.cos(t), np.sin(t)])) for t in np.linspace(0, np.pi, 36, endpoint=False)]
+    return [float(np.ptp(xy @ [np.cos(t), np.sin(t)])) for t in np.linspace(0, np.pi, 36, endpoint=False)]
+
+
+def _is_long(s: Scene, obj: str) -> bool:
+    widths = footprint_widths(s, obj)
     return max(widths) > LONG_RATIO * min(widths)
 
 

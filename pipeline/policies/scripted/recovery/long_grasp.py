@@ -14,6 +14,7 @@ import numpy as np
 
 from pipeline.policies.scripted.grasps import LONG_M, Grasp, _blocked, closing_axis
 from pipeline.policies.scripted.scene import Scene
+from pipeline.policies.scripted.skills import footprint_widths
 
 BLOCKED_M = 0.01  # the palm's way blocked by more than this: slide the grasp
 SHIFTS = (0.015, 0.03, 0.045)  # along the object's length, either way, nearest first
@@ -53,6 +54,5 @@ def slide_clear(scene: Scene, obj: str, g: Grasp) -> Grasp:
 def lying_long(scene: Scene, obj: str) -> bool:
     """A long object lying on its side (a toppled bottle): longer than LONG_M and less
     than half as tall as long."""
-    corners = scene.env.object_corners(obj)[:, :2]
-    widths = [float(np.ptp(corners @ [np.cos(t), np.sin(t)])) for t in np.linspace(0, np.pi, 36, endpoint=False)]
+    widths = footprint_widths(scene, obj)
     return max(widths) > LONG_M and scene.box(obj).size[2] < 0.5 * max(widths)
