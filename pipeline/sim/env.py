@@ -187,6 +187,13 @@ class SimEnv:
         d = self.env.sim.data
         return np.array(d.body_xpos[bid]), np.array(d.body_xquat[bid])
 
+    def object_frame(self, name: str) -> tuple[np.ndarray, np.ndarray]:
+        """World position (3,) and rotation matrix (3, 3; columns: the body's axes) of an
+        object's or fixture's body."""
+        bid = self.env.obj_body_id[name]
+        d = self.env.sim.data
+        return np.array(d.body_xpos[bid]), np.array(d.body_xmat[bid]).reshape(3, 3)
+
     def object_com(self, name: str) -> np.ndarray:
         """World centre of mass of an object (its body and the bodies below it)."""
         return np.array(self.env.sim.data.subtree_com[self.env.obj_body_id[name]])
@@ -335,6 +342,11 @@ class SimEnv:
             "parent": site.parent_name,
             "joints": list(site.joints or []),
         }
+
+    @property
+    def region_names(self) -> list[str]:
+        """Every region site of the task (drawer insides, cook regions, ...)."""
+        return list(self.env.object_sites_dict)
 
     def is_region(self, name: str) -> bool:
         return name in self.env.object_sites_dict

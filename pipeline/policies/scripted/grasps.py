@@ -80,9 +80,7 @@ def object_frame_boxes(scene: Scene, obj: str) -> tuple[np.ndarray, np.ndarray, 
     rotation (columns: body axes in world) and the centre of mass in the body frame. World
     boxes of a turned object are wider than its parts: a thin part is thin only here."""
     env = scene.env
-    bid = env.env.obj_body_id[obj]
-    pos = np.array(env.env.sim.data.body_xpos[bid])
-    rot = np.array(env.env.sim.data.body_xmat[bid]).reshape(3, 3)
+    pos, rot = env.object_frame(obj)
     local = (env.object_corners(obj).reshape(-1, 8, 3) - pos) @ rot
     return np.stack([local.min(axis=1), local.max(axis=1)], axis=1), pos, rot, (env.object_com(obj) - pos) @ rot
 

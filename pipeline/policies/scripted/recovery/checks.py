@@ -233,7 +233,7 @@ def overhanging_drawer(scene: Scene, obj: str, pad: float = 0.02) -> str | None:
     (see `under_drawer`)."""
     b = scene.box(obj)
     ob = np.array([b.lo, b.hi])
-    for name in scene.env.env.object_sites_dict:
+    for name in scene.env.region_names:
         joints = scene.env.region(name)["joints"]
         if not joints or scene.env.joint_frame(joints[0])["kind"] != "slide":
             continue

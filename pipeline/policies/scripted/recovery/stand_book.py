@@ -61,11 +61,8 @@ class BookAxes:
 def book_axes(scene: Scene, obj: str) -> BookAxes | None:
     """A book's axes from its collision boxes in its body frame, or None when `obj` is not
     book-shaped (a thin slab, long, whose body origin lies at one end of a long side)."""
-    env = scene.env
-    bid = env.env.obj_body_id[obj]
-    pos = np.array(env.env.sim.data.body_xpos[bid])
-    rot = np.array(env.env.sim.data.body_xmat[bid]).reshape(3, 3)
-    local = (env.object_corners(obj) - pos) @ rot  # corners in the body frame
+    pos, rot = scene.env.object_frame(obj)
+    local = (scene.env.object_corners(obj) - pos) @ rot  # corners in the body frame
     lo, hi = local.min(axis=0), local.max(axis=0)
     size = hi - lo
     t = int(np.argmin(size))

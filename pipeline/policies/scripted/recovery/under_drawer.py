@@ -30,13 +30,18 @@ HAND_PAD_M = 0.01  # pushed this far past the object's edge
 FIST_ROOM_M = 0.06
 
 
+def pull_side(env, joint: str) -> tuple[int, float]:
+    """The world axis (0: x, 1: y) the drawer of `joint` opens along, and its sign."""
+    fr = env.joint_frame(joint)
+    pull = fr["axis"] * open_sign(fr["range"])
+    k = int(np.argmax(np.abs(pull[:2])))
+    return k, float(np.sign(pull[k]))
+
+
 def uncover_distance(ctx: Ctx, obj: str, joint: str) -> float:
     """How far (m) the drawer must go in so that its parts no longer overhang `obj` (+pad)."""
     s = ctx.scene
-    fr = s.env.joint_frame(joint)
-    pull = fr["axis"] * open_sign(fr["range"])
-    k = int(np.argmax(np.abs(pull[:2])))
-    d = float(np.sign(pull[k]))
+    k, d = pull_side(s.env, joint)
     boxes = s.env.joint_part_boxes(joint)
     front = float(boxes[:, 1, k].max()) if d > 0 else float(-boxes[:, 0, k].min())
     edge = float(s.box(obj).lo[k]) if d > 0 else float(-s.box(obj).hi[k])
@@ -47,10 +52,7 @@ def away_from_drawer(s, obj: str, joint: str, attempt: int, candidates: int = 6)
     """Which grasp candidate (`plan_grasp`'s choice) to take: of the first few, the one whose
     grip site lies farthest from the drawer's front (the wrist and forearm come down over
     it, and a drawer just pushed in still sticks out close by); `attempt` takes the next."""
-    fr = s.env.joint_frame(joint)
-    pull = fr["axis"] * open_sign(fr["range"])
-    k = int(np.argmax(np.abs(pull[:2])))
-    d = float(np.sign(pull[k]))
+    k, d = pull_side(s.env, joint)
     boxes = s.env.joint_part_boxes(joint)
     front = float(boxes[:, 1, k].max()) if d > 0 else float(boxes[:, 0, k].min())
     ranked = sorted(range(candidates), key=lambda c: -d * (plan_grasp(s, obj, None, c).pos[k] - front))
@@ -63,10 +65,7 @@ def beyond_sweep(s, obj: str, joint: str, sweep: np.ndarray) -> np.ndarray | Non
     short way out of its sweep, close to where it goes in next. Of the spots clear of
     everything, the nearest the robot base (lowering an object far out is slow: measured,
     60 steps 0.81 m out). None when none is clear (then `free_spot`)."""
-    fr = s.env.joint_frame(joint)
-    pull = fr["axis"] * open_sign(fr["range"])
-    k = int(np.argmax(np.abs(pull[:2])))
-    d = float(np.sign(pull[k]))
+    k, d = pull_side(s.env, joint)
     box = s.box(obj)
     body = s.env.object_pose(obj)[0][:2]
     base = checks.robot_base(s)[:2]
@@ -135,11 +134,9 @@ def clear_from_under(ctx: Ctx, obj: str, region: str, attempt: int = 0) -> Plan:
                      hover_m=0.08 + 0.03 * min(attempt, 2))
     if checks.held(s) != obj:
         return
-    here = s.env.object_pose(obj)[0]
-    away = [p for p in goal_points(ctx) if float(np.linalg.norm(p[:2] - here[:2])) > 1e-6]
     spot = beyond_sweep(s, obj, joint, sweep)
     if spot is None:
-        spot = checks.free_spot(s, obj, away, [sweep])
+        spot = checks.free_spot(s, obj, goal_points(ctx, obj), [sweep])
     if spot is None:
         raise GiveUp(GiveUpReason.NO_PLAN, f"no free spot on the table to put {obj} aside")
     yield from place_at(ctx, obj, spot)
