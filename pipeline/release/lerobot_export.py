@@ -83,12 +83,16 @@ def render_episode(env: SimEnv, states: np.ndarray, size: int,
 def write_video(path: Path, frames: np.ndarray) -> None:
     import av
 
+    from pipeline.h264 import repeatable
+
     def encode(tmp: Path) -> None:
         with av.open(str(tmp), "w", format="mp4") as box:
             stream = box.add_stream("libx264", rate=fmt.FPS)
             stream.width, stream.height = frames.shape[2], frames.shape[1]
             stream.pix_fmt = "yuv420p"
-            stream.options = {"crf": "20", "g": "2"}  # short GOP: cheap random access for loaders
+            # short GOP: cheap random access for loaders; repeatable: the same frames give the
+            # same bytes with any worker count (crf 22 without mb-tree ~ the old crf 20's size)
+            repeatable(stream, crf=22, g="2")
             for f in frames:
                 box.mux(stream.encode(av.VideoFrame.from_ndarray(f, format="rgb24")))
             box.mux(stream.encode())

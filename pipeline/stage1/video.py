@@ -21,6 +21,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from pipeline.atomic import atomic_path, write_with
+from pipeline.h264 import repeatable
 from pipeline.layout import EpisodeFiles, video_name
 from pipeline.records import FRAME_SCHEMA
 from pipeline.sim import CONTROL_HZ, SimEnv
@@ -49,14 +50,14 @@ def frame_table(steps: list[int], control_hz: int = CONTROL_HZ) -> pa.Table:
 
 
 class Mp4Writer:
-    """H.264/yuv420p MP4 through PyAV, one encoder thread (workers already fill the cores)."""
+    """H.264/yuv420p MP4 through PyAV; the same frames give the same bytes (`pipeline.h264`)."""
 
     def __init__(self, path: Path, fps: int, size: int):
         self.container = av.open(str(path), mode="w")
-        self.stream = self.container.add_stream("h264", rate=fps)
+        self.stream = self.container.add_stream("libx264", rate=fps)
         self.stream.width = self.stream.height = size
         self.stream.pix_fmt = "yuv420p"
-        self.stream.codec_context.thread_count = 1
+        repeatable(self.stream, crf=25)  # without mb-tree ~ x264's default crf 23 in size
 
     def add(self, frame: np.ndarray) -> None:
         for packet in self.stream.encode(av.VideoFrame.from_ndarray(frame, format="rgb24")):

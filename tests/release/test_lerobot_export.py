@@ -153,7 +153,7 @@ def test_one_worker_writes_the_same_dataset_byte_for_byte(exported, tmp_path):
     single = export(one, tmp_path / "one", only=["rollouts"])
     ours, theirs = _files(out / "rollouts"), _files(single / "rollouts")
     assert sorted(ours) == sorted(theirs) and len(ours) == 4 + 2 + 5  # 4 videos, 2 parquet, 5 meta files
-    assert ours == theirs  # x264 is deterministic: the same frames give the same MP4 bytes
+    assert ours == theirs  # repeatable H.264 (pipeline.h264): the same frames, the same MP4 bytes
     for name in ("000000.json", "000001.json"):
         assert (out / "_work/rollouts" / name).read_bytes() == (single / "_work/rollouts" / name).read_bytes()
 

@@ -177,13 +177,15 @@ def mp4_data_url(video: SampledVideo) -> str:
     """The sampled frames as an H.264 MP4 at the effective rate, so container time is true time."""
     import av
 
+    from pipeline.h264 import repeatable
+
     rate = Fraction(video.sample_fps).limit_denominator(1000)
     buf = io.BytesIO()
     with av.open(buf, mode="w", format="mp4") as out:
         stream = out.add_stream("libx264", rate=rate)
         stream.width, stream.height = video.frames.shape[2], video.frames.shape[1]
         stream.pix_fmt = "yuv420p"
-        stream.options = {"crf": "18", "preset": "veryfast"}
+        repeatable(stream, crf=20, preset="veryfast")  # the same video, the same request bytes
         for frame in video.frames:
             out.mux(stream.encode(av.VideoFrame.from_ndarray(frame, format="rgb24")))
         out.mux(stream.encode())
