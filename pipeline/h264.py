@@ -1,18 +1,18 @@
 """H.264 settings under which the same frames give the same MP4 bytes, on any machine.
 
-libx264's defaults do not (benchmarks/h264_repeatability.py, PyAV 18 here): its mb-tree
-rate control reads lookahead memory it has not written at some frame sizes, so encoding the
-same 24 frames again and again in one process gives several different files at 64 and 96 px
-(never at 256 px in the runs so far); and its frame threads make the bytes depend on the
-thread count, which x264 takes from the machine's cores. One thread and mb-tree off give
-one file for every clip, size and thread setting tried. Without mb-tree a file is larger
-at the same crf; two crf steps up gives about the same size and PSNR (measured there).
-
-Repeatable bytes are what let a 1-worker and a 2-worker export, or a rerun, be compared
-byte for byte. One thread costs nothing here: the exporting workers already fill the cores.
+libx264's defaults do not. Its thread pool follows the cores the process may use, and the
+bytes follow the thread count (benchmarks/h264_repeatability.py: every 256 px clip of a run
+gave 2 files on 1 vs 2 cores, 4 files with 1-4 threads). And with threads on auto, encoding
+the same clip again in one process can give another file (tests/release/test_h264.py; CI: a
+1- and a 2-worker LeRobot export differed in one wrist video); probes also caught it with
+one thread and mb-tree on, for some clips, depending on what else the process had allocated,
+never with mb-tree off. So: one thread, mb-tree off. Without mb-tree a file is larger at the
+same crf; a higher crf gives back the size at the same PSNR (measured there). One thread
+costs nothing here: the exporting and rendering workers already fill the cores.
 """
 
 from __future__ import annotations
+
 
 def repeatable(stream, crf: int, **options: str) -> None:
     """Make a PyAV libx264 `stream` encode deterministically at `crf` (mb-tree off, one
