@@ -1,14 +1,14 @@
 """Videos from the worker's render process are the in-process videos, byte for byte, and an
 episode whose videos never came back gets no done marker.
 
-Both cameras byte for byte: stage 1's encoder is repeatable (`pipeline.h264`). With x264's
-defaults the 64 px wrist videos here differed between two runs of the same code."""
+Both cameras byte for byte: stage 1's encoder is repeatable (`pipeline.h264`). With the
+encoder before (one thread, x264's mb-tree on) the 64 px wrist videos here differed between
+two runs of the same code."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-
 
 from pipeline.atomic import Completions
 from pipeline.config import Config
