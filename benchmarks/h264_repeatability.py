@@ -5,7 +5,8 @@ settings, side by side in one run, with file size and picture quality.
 
 Renders both cameras of the first `--episodes` failed stage-1 episodes of RUN from their
 logged states (20 Hz, LeRobot export's rendering, 64 / 96 / 256 px; RUN is only read), and
-the random-motion clip of tests/release/test_h264.py at 64 / 96 px, then:
+the random-motion clip of tests/release/test_h264.py at 64 / 96 px (and its 64 px wrist frames
+with every pixel doubled, cropped to 96 px: the footage of the first one-thread probes), then:
 
 - repeatability: encodes 24-frame windows of each clip `--repeats` times in this process,
   between encodes allocating and freeing buffers of random sizes (what a long export does),
