@@ -25,7 +25,6 @@ export fails naming it (a rerun does only what is missing).
 
 from __future__ import annotations
 
-import hashlib
 import json
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -43,7 +42,8 @@ from pipeline.release import lerobot_format as fmt
 from pipeline.release.manifest import MANIFEST_NAME
 from pipeline.release.scene_physics import scene_task
 from pipeline.runner import Stage, UnitResult, WorkerContext
-from pipeline.sim import SimEnv, get_task
+from pipeline.sim import SimEnv, TaskSpec, get_task
+from pipeline.sim.pool import model_key
 from pipeline.sim.rotations import mat_to_quat
 
 
@@ -57,6 +57,12 @@ class ExportEpisode:
     length: int  # frames to export (states[:length], actions[:length])
     bddl: Path | None = None  # the scene's own BDDL (recovery demos); None: the task's
     meta: dict = field(default_factory=dict)  # extra episodes.jsonl fields
+
+    def spec(self) -> TaskSpec:
+        """The task whose model renders it (with the scene's own BDDL where it has one)."""
+        if self.bddl is None:
+            return get_task(self.suite, self.task)
+        return scene_task(self.suite, self.task, self.instruction, self.bddl)
 
 
 def axis_angle(rot: np.ndarray) -> np.ndarray:
@@ -168,7 +174,7 @@ class ExportUnit:
     start: int  # its first frame's dataset-wide `index`
     task_index: int
     episode: ExportEpisode
-    model: str  # the simulator model it is rendered in (episodes of one model share a shard)
+    model: tuple[str, str]  # the simulator model it is rendered in (`model_key`: one per shard)
 
     @property
     def unit_id(self) -> str:
@@ -179,16 +185,8 @@ def plan_units(episodes: list[ExportEpisode]) -> tuple[list[ExportUnit], list[st
     """One unit per episode, ordered by model (then index), and the dataset's task list."""
     tasks = sorted({e.instruction for e in episodes})
     starts = np.concatenate([[0], np.cumsum([e.length for e in episodes])]).astype(int)
-    digests: dict[Path, str] = {}
-
-    def model(ep: ExportEpisode) -> str:
-        if ep.bddl is None:
-            return f"{ep.suite}/{ep.task}"
-        if ep.bddl not in digests:  # scenes of one task often share their BDDL text: one build
-            digests[ep.bddl] = hashlib.sha256(ep.bddl.read_bytes()).hexdigest()
-        return f"{ep.suite}/{ep.task}/{digests[ep.bddl]}"
-
-    units = [ExportUnit(i, int(starts[i]), tasks.index(ep.instruction), ep, model(ep))
+    # scenes of one task often share their BDDL text: one model, one build
+    units = [ExportUnit(i, int(starts[i]), tasks.index(ep.instruction), ep, model_key(ep.spec()))
              for i, ep in enumerate(episodes)]
     return sorted(units, key=lambda u: (u.model, u.index)), tasks
 
@@ -214,13 +212,12 @@ class ExportStage(Stage[ExportUnit]):
     def units(self, cfg=None) -> list[ExportUnit]:
         return self.planned
 
-    def group(self, unit: ExportUnit) -> str:
+    def group(self, unit: ExportUnit) -> tuple[str, str]:
         return unit.model
 
     def process(self, unit: ExportUnit, ctx: WorkerContext) -> UnitResult:
         ep = unit.episode
-        env = ctx.env(get_task(ep.suite, ep.task) if ep.bddl is None else
-                      scene_task(ep.suite, ep.task, ep.instruction, ep.bddl))
+        env = ctx.env(ep.spec())
         meta = export_episode(env, ep, unit.index, unit.start, unit.task_index, Path(self.dataset), self.size,
                               self.quality)
         write_json(self.root / f"{unit.unit_id}.json", meta)  # before the marker (the runner's, last)

@@ -18,6 +18,11 @@ from pipeline.sim.env import SimEnv
 from pipeline.sim.registry import TaskSpec
 
 
+def model_key(task: TaskSpec) -> tuple[str, str]:
+    """What a built environment is for: the task and the content of its BDDL file."""
+    return task.task_id, hashlib.sha256(task.bddl_path.read_bytes()).hexdigest()
+
+
 class EnvCache:
     """Per-process LRU of built `SimEnv`s keyed by (task id, BDDL content). Not thread-safe."""
 
@@ -29,7 +34,7 @@ class EnvCache:
         self.builds = 0  # how many environments were built (for tests and progress)
 
     def get(self, task: TaskSpec) -> SimEnv:
-        key = (task.task_id, hashlib.sha256(task.bddl_path.read_bytes()).hexdigest())
+        key = model_key(task)
         env = self._envs.pop(key, None)
         if env is None:
             while len(self._envs) >= self.capacity:
