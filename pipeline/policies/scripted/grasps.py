@@ -53,6 +53,12 @@ def closing_axis(yaw: float) -> np.ndarray:
     return np.array([-np.sin(yaw), np.cos(yaw), 0.0])
 
 
+def closing_yaw(direction: np.ndarray) -> float:
+    """A top-down hand yaw whose `closing_axis` is the horizontal `direction` (in (-pi, pi];
+    yaw + pi closes along it too)."""
+    return float(np.arctan2(-direction[0], direction[1]))
+
+
 def _blocked(scene: Scene, pos: np.ndarray, yaw: float, top: float, skip_tips: bool = False) -> float:
     """How far (m) anything sticks up into the hand's way when the grip site is at `pos`:
     under both fingertips (unless `skip_tips`) and under the palm's ends (about 6 cm above
@@ -108,7 +114,7 @@ def handle_grasp(scene: Scene, obj: str) -> Grasp | None:
     # closing_axis(yaw) = (-sin, cos), the same for yaw + pi: yaw in (-pi/2, pi/2] as for an
     # unturned pot (0 or pi/2), widened by YAW_BAND so a pot turned a few degrees the other
     # way is not grasped with the hand turned half round
-    yaw = float(np.arctan2(-d[0], d[1]))
+    yaw = closing_yaw(d)
     lo_yaw = -np.pi / 2 + YAW_BAND
     yaw = yaw - np.pi if yaw > lo_yaw + np.pi else yaw + np.pi if yaw <= lo_yaw else yaw
     pos = body + rot @ ((lo + hi) / 2)

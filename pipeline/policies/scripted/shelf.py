@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.policies.scripted.grasps import SLAB_THIN_M, is_upright_slab
+from pipeline.policies.scripted.grasps import SLAB_THIN_M, closing_yaw, is_upright_slab
 from pipeline.policies.scripted.primitives import Grip
 from pipeline.policies.scripted.skills import CARRY_CLEARANCE, Ctx, Plan, region_box, travel
 from pipeline.policies.scripted.slot import footprint, has_roof
@@ -112,7 +112,7 @@ def slide_into_shelf(ctx: Ctx, obj: str, target: str, into: np.ndarray) -> Plan:
     box = s.box(obj)
     across = np.array([-into[1], into[0], 0.0])
     # yaw whose closing axis runs along `into` (either sign), the one nearer the current yaw
-    base_yaw = float(np.arctan2(-into[0], into[1]))
+    base_yaw = closing_yaw(into)
     yaw = min((base_yaw, base_yaw - np.pi, base_yaw + np.pi), key=lambda y: abs(y - ctx.yaw_hold))
     lo, hi = _height_range(ctx, obj, target)
     # high in the gap: the wrist, a hand's length behind, then passes over books standing there

@@ -134,6 +134,14 @@ HAND_SPAN = 0.09  # the closed fingers' outer width across a held object: clear 
 HOUSING_HALF, HOUSING_Z = np.array([0.03, 0.10]), 0.07
 
 
+def _carried_foot(s: Scene, obj: str, turn: float) -> tuple[np.ndarray, np.ndarray]:
+    """Size (xy) and centre relative to the body origin of the footprint the object comes
+    down with: its box as it is, or turned by `turn` (`_turned_foot`)."""
+    if turn == 0:
+        return s.box(obj).size[:2], box_centre_offset(s, obj)
+    return _turned_foot(s, obj, turn)
+
+
 def _turned_foot(s: Scene, obj: str, turn: float) -> tuple[np.ndarray, np.ndarray]:
     """Size (xy) and centre relative to the body origin of the object's footprint box after
     the hand turns it by `turn` about the vertical."""
@@ -177,26 +185,27 @@ def _place_choice(ctx: Ctx, obj: str, target: str) -> tuple[np.ndarray, int, flo
         others = []  # a container object (a basket): things may share its middle
     if not drawer and not others:
         return xy, 0, 0.0
-    best = _best_spot(s, obj, r, half, top, xy, others, size, None)
-    if drawer and best[0][0] > 0 and _is_long(s, obj):
+    key, spot = _best_spot(s, obj, r, half, top, xy, others, size, None)
+    best = (key, spot, 0.0)
+    if drawer and key[0] > 0 and _is_long(s, obj):
         # judged again with the hand and the footprint's true extent, as it lies and turned
         best = None
         for turn in (0.0, *TURNS):
             size_t, shift_t = _turned_foot(s, obj, turn)
             # the fingers close across its width at its middle and go down with it
             size_t[np.argmin(size_t)] = max(float(size_t.min()), HAND_SPAN)
-            cand = _best_spot(s, obj, r, half, top, xy, others, size_t, shift_t)
-            if best is None or cand[0][0] < best[0][0]:
-                best = (cand[0], cand[1], turn)
+            key, spot = _best_spot(s, obj, r, half, top, xy, others, size_t, shift_t)
+            if best is None or key[0] < best[0][0]:
+                best = (key, spot, turn)
             if best[0][0] == 0:
                 break
     return best[1], best[0][0], best[2]
 
 
 def _best_spot(s: Scene, obj: str, r: dict, half: np.ndarray, top: float, xy: np.ndarray, others: list,
-               size: np.ndarray, shift: np.ndarray | None) -> tuple[tuple, np.ndarray, float]:
-    """((blocked cells, crowd and distance), body xy, turn 0) of the best grid point; `shift`
-    (a turned footprint's centre from the body) also makes footprint cells off the region count."""
+               size: np.ndarray, shift: np.ndarray | None) -> tuple[tuple, np.ndarray]:
+    """((blocked cells, crowd and distance), body xy) of the best grid point; `shift` (a
+    turned footprint's centre from the body) also makes footprint cells off the region count."""
     drawer = bool(r["joints"])
     best = None
     # a drawer leaves a window only a few mm long between its front wall and the handles
@@ -222,7 +231,7 @@ def _best_spot(s: Scene, obj: str, r: dict, half: np.ndarray, top: float, xy: np
             d = (blocked(p), 100 * crowd + float(np.linalg.norm(p - xy)))
             if best is None or d < best[0]:
                 best = (d, p)
-    return (best[0], best[1], 0.0) if best is not None else ((0, 0.0), xy, 0.0)
+    return best if best is not None else ((0, 0.0), xy)
 
 
 def _drawer_clearance(s: Scene, obj: str, joint: str, centre: np.ndarray, half: np.ndarray, top: float,
@@ -290,9 +299,8 @@ def support_ceiling(env, target: str) -> float:
 def destination(ctx: Ctx, obj: str, target: str) -> np.ndarray:
     """(x, y, support top) where the object's body should come to rest (no noise)."""
     s = ctx.scene
-    box = s.box(obj)
     dest, _, turn = _place_choice(ctx, obj, target)
-    size, shift = (box.size[:2], box.centre[:2] - s.env.object_pose(obj)[0][:2]) if turn == 0 else _turned_foot(s, obj, turn)
+    size, shift = _carried_foot(s, obj, turn)
     foot = dest + shift
     below = support_ceiling(s.env, target)
     radius = 0.6 * float(min(size[0], size[1])) / 2
@@ -394,7 +402,7 @@ def place_at(ctx: Ctx, obj: str, xy: np.ndarray, below: float = np.inf, stand: b
         gap = STAND_GAP
     c, sn = np.cos(turn), np.sin(turn)
     hold[:2] = np.array([[c, -sn], [sn, c]]) @ hold[:2]  # (turned with the hand about the grip site)
-    size, shift = (box.size[:2], box.centre[:2] - body[:2]) if turn == 0 else _turned_foot(s, obj, turn)
+    size, shift = _carried_foot(s, obj, turn)
     radius = 0.6 * float(min(size[0], size[1])) / 2
     offset_xy = ctx.noise.place_offset()[:2]
     dest = np.asarray(xy, dtype=float)[:2] + offset_xy

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from pipeline.policies.scripted.grasps import closing_yaw
 from pipeline.policies.scripted.primitives import Grip
 from pipeline.policies.scripted.scene import TABLE_MARGIN
 from pipeline.policies.scripted.skills import CARRY_CLEARANCE, Ctx, Plan, region_box, travel
@@ -26,7 +27,7 @@ PUSH_OUT_M = 0.018  # grip site this far outside the opening at the end of the p
 
 def _yaw_closing_along(direction: np.ndarray, near: float) -> float:
     """Hand yaw whose closing axis runs along `direction` (either sign), nearest `near`."""
-    base = float(np.arctan2(-direction[0], direction[1]))
+    base = closing_yaw(direction)
     return min((base, base - np.pi, base + np.pi), key=lambda y: abs(y - near))
 
 

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.policies.scripted.grasps import closing_axis
+from pipeline.policies.scripted.grasps import closing_axis, closing_yaw
 from pipeline.policies.scripted.primitives import Grip
 from pipeline.policies.scripted.scene import TABLE_MARGIN, Scene
 from pipeline.policies.scripted.skills import (CARRY_CLEARANCE, HAND_CLEARANCE, Ctx, Plan, place_xy,
@@ -98,7 +98,7 @@ def lying_handle_grasp(scene: Scene, obj: str) -> HandleGrasp | None:
         return None  # the handle is under the mug
     c = np.cross(axis, [0.0, 0.0, 1.0])
     c /= np.linalg.norm(c)
-    yaw = float(np.arctan2(-c[0], c[1]))
+    yaw = closing_yaw(c)
     yaw = (yaw + np.pi / 2) % np.pi - np.pi / 2
     bar_world = pos + rot @ centre
     width = 2 * float(half @ np.abs(rot.T @ closing_axis(yaw)))  # the bar across the fingers
@@ -134,7 +134,6 @@ def grasp_by_handle(ctx: Ctx, obj: str, g: HandleGrasp, hover_m: float = 0.08) -
     yield Grip(1.0, ctx.close_steps, label="close")
     yield ctx.move(s.eef() + [0, 0, 0.1], gripper=1.0, speed=0.6, yaw=g.yaw, approach=g.approach, tol=0.02,
                    label="pick_lift")  # (carried with the hand as it is: see place_by_handle)
-
 
 
 def place_by_handle(ctx: Ctx, obj: str, target: str) -> Plan:

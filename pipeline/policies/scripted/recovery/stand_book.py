@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.policies.scripted.grasps import SLAB_GRIP_BELOW_TOP, SLAB_RATIO, SLAB_THIN_M
+from pipeline.policies.scripted.grasps import SLAB_GRIP_BELOW_TOP, SLAB_RATIO, SLAB_THIN_M, closing_yaw
 from pipeline.policies.scripted.primitives import Grip, axis_angle_matrix, hand_orientation, rotation_error
 from pipeline.policies.scripted.scene import Scene
 from pipeline.policies.scripted.skills import HAND_CLEARANCE, Ctx, Plan, travel
@@ -102,11 +102,6 @@ def _tilt(up: np.ndarray) -> float:
     return float(np.arccos(np.clip(up[2], -1.0, 1.0)))
 
 
-def _yaw_of(closing: np.ndarray) -> float:
-    """Top-down hand yaw whose closing axis (R_z(yaw) y) is the horizontal `closing`."""
-    return float(np.arctan2(-closing[0], closing[1]))
-
-
 def tilted_grasp(ax: BookAxes) -> tuple[float, np.ndarray]:
     """(yaw, approach) of a hand pointing along -up (the `up` given), closing
     across the faces. `hand_orientation(yaw, approach)` is the top-down hand at `yaw` turned
@@ -118,7 +113,7 @@ def tilted_grasp(ax: BookAxes) -> tuple[float, np.ndarray]:
     turn = axis_angle_matrix(h, angle) if np.linalg.norm(h) > 1e-6 else np.eye(3)
     # the fingers are symmetric: of the two ways round, the one nearer the wrist's middle.
     # Turning back to top-down undoes `turn`: the closing axis returns to c0, the yaw stays
-    yaw = min((_yaw_of(turn.T @ (sg * ax.thin)) for sg in (1.0, -1.0)), key=abs)
+    yaw = min((closing_yaw(turn.T @ (sg * ax.thin)) for sg in (1.0, -1.0)), key=abs)
     return yaw, a
 
 

@@ -120,10 +120,10 @@ def clear_from_under(ctx: Ctx, obj: str, region: str, attempt: int = 0) -> Plan:
     dist = min(uncover_distance(ctx, obj, joint), out)
     ctx.begin("close", ("close", region), region)
     yield from push_in(ctx, joint, dist)
+    covered = checks.overhanging_drawer(s, obj, pad=0.0) is not None
     if ctx.truth is not None:
-        ctx.end("achieved" if checks.overhanging_drawer(s, obj, pad=0.0) is None else "half_open",
-                f"{joint} at {env.joint_frame(joint)['qpos']:.3f}")
-    if checks.overhanging_drawer(s, obj, pad=0.0) is not None:
+        ctx.end("half_open" if covered else "achieved", f"{joint} at {env.joint_frame(joint)['qpos']:.3f}")
+    if covered:
         return
     sweep = checks.drawer_sweep(s, joint)
     # aside: grasped from the side away from the drawer, put down near where it is (it goes
