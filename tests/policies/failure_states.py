@@ -61,3 +61,18 @@ def grasp_wrong(env: SimEnv, obj: str, max_steps: int = 200) -> None:
             prim.steps += len(chunk)
             steps += len(chunk)
             eef, rot = env.eef_pose()
+
+
+def drive(env: SimEnv, ctx: Ctx, plan, max_steps: int = 300) -> int:
+    """Run a skill's primitives (a plan generator over `ctx`) in closed loop; steps taken."""
+    steps = 0
+    for prim in plan:
+        eef, rot = env.eef_pose()
+        while not prim.done(eef, rot) and steps < max_steps:
+            chunk = emit(prim, eef, rot, 8, ctx.yaw_hold, ctx.approach_hold)
+            for a in chunk:
+                env.step(a)
+            prim.steps += len(chunk)
+            steps += len(chunk)
+            eef, rot = env.eef_pose()
+    return steps

@@ -13,7 +13,7 @@ from pipeline.policies.scripted.recovery.variation import variation_levels
 from pipeline.policies.scripted.scene import Scene
 from pipeline.rollout import run_episode
 from pipeline.sim import build_env, tasks
-from tests.policies.failure_states import grasp_wrong, lying, set_joint, set_pose, start
+from tests.policies.failure_states import drive, grasp_wrong, lying, set_joint, set_pose, start
 
 pytestmark = [pytest.mark.sim, pytest.mark.xdist_group("recovery_expert")]
 
@@ -248,3 +248,28 @@ def test_a_goal_object_before_a_part_open_drawer_is_set_aside_without_lifting_ov
         spot = checks.free_spot(s, obj, goal_points(ctx, obj), [sweep], corridor_m=HAND_REACH_M)
         assert spot is not None
         assert sweep_clearance(s, s.box(obj).centre, spot, HAND_REACH_M, {obj}) < sweep[0, 2]
+
+
+# Known gap, kept running: put-aside grasps at the usual height since the milk carton of
+# libero_10 task 1 (init 1) stayed wedged between the open fingers when held near its top
+# (`top_hold`, removed). Grasped at mid-height, this bottle's top meets the palm and it comes
+# down lying (measured: 8.8 of 15.7 cm tall). strict: a fix makes this test fail until the
+# mark is removed.
+@pytest.mark.xfail(strict=True, reason="a tall put-aside object is set down lying (top_hold removed)")
+def test_a_tall_obstruction_is_set_aside_standing(bowl_on_plate):
+    from pipeline.config import ScriptedNoise
+    from pipeline.policies.scripted.noise import Noise
+    from pipeline.policies.scripted.recovery.put_aside import put_aside
+    from pipeline.policies.scripted.skills import Ctx
+
+    task, env = bowl_on_plate
+    start(env)
+    s = Scene(env)
+    obj = "wine_bottle_1"
+    start_xy, tall = env.object_pose(obj)[0][:2].copy(), s.box(obj).size[2]
+    ctx = Ctx(scene=s, noise=Noise(ScriptedNoise(), np.random.default_rng(0)))
+    drive(env, ctx, put_aside(ctx, obj), max_steps=200)
+    env.settle(10)
+    assert checks.held(s) is None
+    assert np.linalg.norm(env.object_pose(obj)[0][:2] - start_xy) > 0.03
+    assert s.box(obj).size[2] > 0.9 * tall  # standing
