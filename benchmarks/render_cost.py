@@ -1,20 +1,22 @@
-"""CPU cost of one stage-1 video frame per render option, and what each option does to the picture.
+"""Cost of one stage-1 video frame per render option, and how far each is from LIBERO's own frame.
 
     .venv/bin/python benchmarks/render_cost.py [--suite libero_spatial] [--task-index 0] [--rounds 3]
+    .venv/bin/python benchmarks/render_cost.py --from FOLDER   # a prepared folder (e.g. on a GPU machine)
 
 One episode of the smoke config's policy (160 steps, no early stop) gives the states of a
-4-fps video; each option then renders those frames of both cameras at 256 px in a fresh
-process, as stage 1's render process does (pipeline/sim/state_render.py, from the saved
-model), warm (renderer built, one pass first), and reports process CPU time per frame
-(`time.process_time`: every thread, llvmpipe's included), the H.264 encode per frame, and
-the mean pixel difference against the stage's default. CPU time, not wall time: the
-numbers hold on a busy machine. Rounds alternate the options so drifting load spreads evenly.
+4-fps video; LIBERO's own `OffScreenRenderEnv` renders each of those states at 256 px (the
+reference, `libero.npz`). Each option then renders the same frames of both cameras at 256 px
+in a fresh process, as stage 1's render process does (pipeline/sim/state_render.py, from the
+saved model, or from `scene.xml` + `assets/` where no MJB is there), warm (renderer built, one
+pass first), and reports process CPU time per frame (`time.process_time`: every thread,
+llvmpipe's included), wall time per frame (what counts on a GPU, where the CPU waits), the
+H.264 encode per frame, and the mean / max pixel difference against LIBERO's frame. Rounds
+alternate the options so drifting load spreads evenly.
 
-Options: the default (fast quality, geoms outside the view culled), the same without
-culling (the code before), with LP_NUM_THREADS=1 and =0 (Mesa's llvmpipe threads; read once
-per process), LIBERO's standard quality, and the default with the translucent collision
-boxes hidden (robosuite draws them at alpha 0.3 in geom group 0; a picture change, not
-adopted).
+Options: standard (LIBERO's frame: the only quality for policies and training data), fast
+(no MSAA, no reflections, geoms outside the view culled: the stage-1 video default), fast not
+culled, LP_NUM_THREADS=1 (Mesa's llvmpipe threads; read once per process), and the renderer
+before version 2 at both qualities (robosuite's collision geometry drawn: geom group 0).
 """
 
 from __future__ import annotations
@@ -35,13 +37,14 @@ import numpy as np  # noqa: E402
 CAMERAS = ["agentview", "robot0_eye_in_hand"]
 SIZE, FPS = 256, 4
 OPTIONS = {  # name -> (extra environment, child options)
-    "default (fast, culled)": ({}, {}),
-    "fast, not culled (before)": ({}, {"cull": False}),
-    "default, LP_NUM_THREADS=1": ({"LP_NUM_THREADS": "1"}, {}),
-    "default, LP_NUM_THREADS=0": ({"LP_NUM_THREADS": "0"}, {}),
-    "standard (LIBERO's look)": ({}, {"quality": "standard"}),
-    "default, collision boxes hidden": ({}, {"hide_collision": True}),
+    "standard (LIBERO's frame)": ({}, {"quality": "standard"}),
+    "fast (culled, video default)": ({}, {}),
+    "fast, not culled": ({}, {"cull": False}),
+    "fast, LP_NUM_THREADS=1": ({"LP_NUM_THREADS": "1"}, {}),
+    "v1 standard (collision drawn)": ({}, {"quality": "standard", "collision": True}),
+    "v1 fast (collision drawn)": ({}, {"collision": True}),
 }
+REFERENCE = "standard (LIBERO's frame)"
 
 
 def prepare(args, out: Path) -> None:
@@ -69,37 +72,69 @@ def prepare(args, out: Path) -> None:
         save_model(env, out / "model.mjb")
         np.savez(out / "fields.npz", **reset_fields(env))
         policy.close()
+    np.savez_compressed(out / "libero.npz", **libero_frames(task, np.load(out / "states.npy")))
     print(f"{task.task_id}: {len(np.load(out / 'states.npy'))} frames x {len(CAMERAS)} cameras at {SIZE} px", flush=True)
 
 
-def child(folder: Path, name: str, opts: dict, reps: int) -> None:
-    """Render the frames `reps` times (after one warm pass); print CPU ms per frame as JSON."""
+def libero_frames(task, states: np.ndarray) -> dict[str, np.ndarray]:
+    """LIBERO's own frames of `states`: `OffScreenRenderEnv` restored as the card says, then
+    robosuite's `sim.render` (its observation call) per state, flipped right side up."""
+    from libero.libero.envs import OffScreenRenderEnv
+
+    env = OffScreenRenderEnv(bddl_file_name=str(task.bddl_path), camera_heights=SIZE, camera_widths=SIZE)
+    try:
+        np.random.seed(0)
+        env.reset()
+        out: dict[str, list] = {c: [] for c in CAMERAS}
+        for state in states:
+            env.set_init_state(state)
+            for c in CAMERAS:
+                out[c].append(env.env.sim.render(camera_name=c, width=SIZE, height=SIZE)[::-1])
+        return {c: np.asarray(v) for c, v in out.items()}
+    finally:
+        env.close()
+
+
+def _state_renderer(folder: Path):
+    """The stage-1 render process's renderer, from the MJB or, where there is none, the XML."""
+    import mujoco
+
     from pipeline.sim.state_render import StateRenderer
+
+    if (folder / "model.mjb").is_file():
+        return StateRenderer(folder / "model.mjb")
+    sr = StateRenderer.__new__(StateRenderer)
+    sr._mujoco, sr._renderers = mujoco, {}
+    sr.model = mujoco.MjModel.from_xml_path(str(folder / "scene.xml"))
+    sr.data = mujoco.MjData(sr.model)
+    return sr
+
+
+def child(folder: Path, name: str, opts: dict, reps: int) -> None:
+    """Render the frames `reps` times (after one warm pass); print ms per frame as JSON."""
     from pipeline.stage1.video import write_videos
 
     quality = opts.get("quality", "fast")
     fields = dict(np.load(folder / "fields.npz"))
     states = np.load(folder / "states.npy")
-    sr = StateRenderer(folder / "model.mjb")
+    sr = _state_renderer(folder)
     r = sr.renderer(SIZE, quality)
     r.cull = r.cull and opts.get("cull", True)
-    if opts.get("hide_collision"):
-        m = sr.model
-        boxes = (m.geom_group == 0) & (m.geom_rgba[:, 3] > 0) & (m.geom_rgba[:, 3] < 1) & (
-            (m.geom_contype != 0) | (m.geom_conaffinity != 0))
-        m.geom_group[boxes] = 3
+    if opts.get("collision"):  # the renderer before version 2
+        r._option.geomgroup[0] = 1
     frames = sr.render_states(states, CAMERAS, SIZE, quality, fields)  # warm
-    c0 = time.process_time()
+    c0, w0 = time.process_time(), time.perf_counter()
     for _ in range(reps):
         frames = sr.render_states(states, CAMERAS, SIZE, quality, fields)
-    render_ms = (time.process_time() - c0) / (reps * len(states) * len(CAMERAS)) * 1e3
+    n = reps * len(states) * len(CAMERAS)
+    render_ms, wall_ms = (time.process_time() - c0) / n * 1e3, (time.perf_counter() - w0) / n * 1e3
     c0 = time.process_time()
     with tempfile.TemporaryDirectory() as tmp:
         write_videos(frames, list(range(len(states))), Path(tmp), FPS)
     encode_ms = (time.process_time() - c0) / (len(states) * len(CAMERAS)) * 1e3
     np.save(folder / f"frames-{name}.npy", np.stack([frames[c] for c in CAMERAS]))
     sr.close()
-    print(json.dumps({"render_ms": render_ms, "encode_ms": encode_ms}))
+    print(json.dumps({"render_ms": render_ms, "wall_ms": wall_ms, "encode_ms": encode_ms}))
 
 
 def main() -> None:
@@ -109,13 +144,16 @@ def main() -> None:
     ap.add_argument("--horizon", type=int, default=160)
     ap.add_argument("--rounds", type=int, default=3)
     ap.add_argument("--reps", type=int, default=2, help="render passes per measurement")
+    ap.add_argument("--from", dest="folder", type=Path, help="a prepared folder (states, fields, model, libero.npz)")
+    ap.add_argument("--json", type=Path, help="also write the table as JSON here")
     ap.add_argument("--child", nargs=3, metavar=("FOLDER", "NAME", "OPTIONS"), help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.child:
         return child(Path(args.child[0]), args.child[1], json.loads(args.child[2]), args.reps)
 
-    folder = Path(tempfile.mkdtemp(prefix="render-cost-"))
-    prepare(args, folder)
+    folder = args.folder or Path(tempfile.mkdtemp(prefix="render-cost-"))
+    if args.folder is None:
+        prepare(args, folder)
     runs: dict[str, list[dict]] = {name: [] for name in OPTIONS}
     keys = {name: f"o{i}" for i, name in enumerate(OPTIONS)}
     for _ in range(args.rounds):
@@ -125,15 +163,22 @@ def main() -> None:
                 env={**os.environ, **env_vars}, capture_output=True, text=True, check=True)
             runs[name].append(json.loads(out.stdout.strip().splitlines()[-1]))
             print(f"  {name:<34} render {runs[name][-1]['render_ms']:6.1f} ms", flush=True)
-    base = np.load(folder / f"frames-{keys['default (fast, culled)']}.npy").astype(np.int16)
-    ref = np.median([r["render_ms"] for r in runs["default (fast, culled)"]])
-    print(f"CPU ms per frame (median of {args.rounds} rounds; 1 frame = 1 camera), pixel difference vs the default:")
+    lib = np.load(folder / "libero.npz")
+    base = np.stack([lib[c] for c in CAMERAS]).astype(np.int16)
+    ref = np.median([r["render_ms"] for r in runs[REFERENCE]])
+    print(f"ms per frame (median of {args.rounds} rounds; 1 frame = 1 camera, {SIZE} px), pixels vs LIBERO's own frame:")
+    table = []
     for name in OPTIONS:
-        render = np.median([r["render_ms"] for r in runs[name]])
-        encode = np.median([r["encode_ms"] for r in runs[name]])
+        row = {k: float(np.median([r[k] for r in runs[name]])) for k in ("render_ms", "wall_ms", "encode_ms")}
         diff = np.abs(np.load(folder / f"frames-{keys[name]}.npy").astype(np.int16) - base)
-        print(f"  {name:<34} render {render:6.1f} ms ({render / ref:4.2f}x)  encode {encode:4.1f} ms  "
-              f"pixels: mean {diff.mean():5.2f}/255, {(diff.max(-1) > 16).mean() * 100:5.2f}% off by > 16", flush=True)
+        row.update(option=name, mean_diff=float(diff.mean()), max_diff=int(diff.max()),
+                   off16_pct=float((diff.max(-1) > 16).mean() * 100))
+        table.append(row)
+        print(f"  {name:<32} CPU {row['render_ms']:6.1f} ms ({row['render_ms'] / ref:4.2f}x)  wall {row['wall_ms']:6.1f} ms"
+              f"  encode {row['encode_ms']:4.1f} ms  pixels: mean {row['mean_diff']:5.2f}/255, max {row['max_diff']:3d}, "
+              f"{row['off16_pct']:5.2f}% off by > 16", flush=True)
+    if args.json:
+        args.json.write_text(json.dumps(table, indent=1))
     print(f"(frames and states in {folder})")
 
 

@@ -142,7 +142,9 @@ class OpenpiPolicyConfig(_Strict):
     host: str = "127.0.0.1"
     port: int = Field(default=8000, ge=1, le=65535)
     api_key: str | None = None
-    # how images are sent: LIBERO examples flip 180 degrees to match training data
+    # openpi's LIBERO example: the simulator renders both cameras at 256 px
+    # (LIBERO_ENV_RESOLUTION), turned 180 degrees, then resized with padding to 224 px
+    env_resolution: int = Field(default=256, ge=32)
     image_size: int = Field(default=224, ge=32)
     rotate_180: bool = True
 

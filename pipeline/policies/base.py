@@ -5,8 +5,9 @@ position and axis-angle rotation, then the gripper command, -1 open / +1 close).
 runner executes `chunk_size` of those actions open loop, then asks again.
 
 Policies that plan from privileged simulator state (the scripted expert) read
-`obs.sim`; image policies (openpi) declare `cameras` and get images resized to
-`image_size`, right side up. Nothing else of the simulator reaches a policy.
+`obs.sim`; image policies (openpi) declare `cameras` and get LIBERO's own frames rendered
+at `image_size` (the camera resolution their convention renders at; the policy resizes
+further itself), right side up. Nothing else of the simulator reaches a policy.
 """
 
 from __future__ import annotations

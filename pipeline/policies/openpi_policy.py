@@ -1,9 +1,10 @@
 """A client of the openpi websocket policy protocol (pi0, pi0.5 and compatible servers).
 
-Inputs: an `Observation` with agentview and wrist images (right side up, as `SimEnv.render`
-gives them). Sent (openpi's LIBERO example format, msgpack-numpy over a websocket via
-`openpi_client.WebsocketClientPolicy`):
-    observation/image, observation/wrist_image  HxWx3 uint8 at `image_size`
+Inputs: an `Observation` with agentview and wrist images rendered at `env_resolution`
+(256 px, right side up, LIBERO's own frame: `SimEnv.render`). Sent (openpi's LIBERO example,
+`examples/libero/main.py`, msgpack-numpy over a websocket via `openpi_client.WebsocketClientPolicy`):
+    observation/image, observation/wrist_image  `image_size` (224) uint8, `image_tools.resize_with_pad`
+                                                of the 256 px frame, as the example resizes
     observation/state   float32 (8,): eef position, eef axis-angle, gripper qpos (2)
     prompt              the task instruction
 Received: `actions`, an (N, 7) chunk (N >= 1), returned as float64.
@@ -63,17 +64,30 @@ def prepare_image(img: np.ndarray, size: int, rotate_180: bool) -> np.ndarray:
     return np.ascontiguousarray(img)
 
 
+CAMERAS = ("agentview", "robot0_eye_in_hand")
+
+
+def openpi_request(obs: Observation, cfg: OpenpiPolicyConfig) -> dict:
+    """The observation dict openpi's LIBERO example sends for `obs` (images at `env_resolution`)."""
+    return {
+        "observation/image": prepare_image(obs.images["agentview"], cfg.image_size, cfg.rotate_180),
+        "observation/wrist_image": prepare_image(obs.images["robot0_eye_in_hand"], cfg.image_size, cfg.rotate_180),
+        "observation/state": libero_state(obs),
+        "prompt": str(obs.instruction),
+    }
+
+
 class OpenpiPolicy:
     """`Policy` backed by a remote openpi server; one websocket per worker process."""
 
-    cameras: tuple[str, ...] = ("agentview", "robot0_eye_in_hand")
+    cameras: tuple[str, ...] = CAMERAS
 
     def __init__(self, cfg: OpenpiPolicyConfig, name: str | None = None):
         from openpi_client.websocket_client_policy import WebsocketClientPolicy
 
         self.cfg = cfg
         self.name = name or "openpi"
-        self.image_size = cfg.image_size
+        self.image_size = cfg.env_resolution  # what the simulator renders; resized in `request`
         try:
             self._client = WebsocketClientPolicy(host=cfg.host, port=cfg.port, api_key=cfg.api_key)
         except OSError as e:
@@ -85,14 +99,7 @@ class OpenpiPolicy:
 
     def request(self, obs: Observation) -> dict:
         """The observation dict sent to the server (public for tests and tools)."""
-        return {
-            "observation/image": prepare_image(obs.images["agentview"], self.image_size, self.cfg.rotate_180),
-            "observation/wrist_image": prepare_image(
-                obs.images["robot0_eye_in_hand"], self.image_size, self.cfg.rotate_180
-            ),
-            "observation/state": libero_state(obs),
-            "prompt": str(obs.instruction),
-        }
+        return openpi_request(obs, self.cfg)
 
     def act(self, obs: Observation) -> np.ndarray:
         try:
@@ -107,7 +114,8 @@ class OpenpiPolicy:
         return actions
 
     def params(self) -> dict:
-        return {"host": self.cfg.host, "port": self.cfg.port, "image_size": self.image_size,
+        return {"host": self.cfg.host, "port": self.cfg.port, "env_resolution": self.cfg.env_resolution,
+                "image_size": self.cfg.image_size,
                 "rotate_180": self.cfg.rotate_180, "server_metadata": _jsonable(self.server_metadata)}
 
     def close(self) -> None:

@@ -1,14 +1,25 @@
-"""Offscreen rendering straight from MuJoCo, right side up.
+"""Offscreen rendering straight from MuJoCo, right side up, drawing what LIBERO draws.
 
-robosuite's `sim.render` returns images upside down (OpenGL's origin); `mujoco.Renderer`
-returns them the right way, costs the same (about 120 ms per 256x256 frame on this CPU),
-and works on an environment built without robosuite's offscreen renderer, so physics-only
-rollouts stay cheap and frames can be rendered later from logged states.
+LIBERO renders through robosuite's `MjRenderContext` (robosuite/utils/binding_utils.py):
+a scene of at most 1000 geoms, geom group 0 (robosuite's collision meshes) hidden unless
+`render_collision_mesh`, groups 1-2 drawn, the model's own lights, materials and 4x
+multisampling, the fixed camera, no flip (so its images are upside down). `FrameRenderer`
+draws through `mujoco.Renderer` with the same scene option and scene size, and
+`mujoco.Renderer` returns the image right side up: at "standard" quality a frame equals
+LIBERO's `OffScreenRenderEnv` observation flipped vertically, pixel for pixel, for both
+cameras and any size (tests/sim/test_libero_frames.py builds LIBERO's own environment beside
+ours and compares). `RENDERER_VERSION` names this renderer; version 1 (before 2026-11-27)
+drew the collision meshes over the visual ones (a green arm, a blue gripper, an olive table),
+and every frame file records the version that made it.
 
-Quality: "standard" is LIBERO's own look (4x multisampling, reflective table), which
-policies are trained on. "fast" turns both off: 2.3x cheaper per frame in software
-rendering (108 -> 46 ms at 256x256 here) for a mean pixel difference of 1.4/255, meant for
-videos people and VLMs watch, never for policy inputs.
+It renders without robosuite's offscreen renderer, so physics-only rollouts stay cheap and
+frames can be rendered later from logged states.
+
+Quality: "standard" is LIBERO's frame, which policies are trained on: the only quality
+for policy inputs and training data. "fast" is the same scene without multisampling and
+reflections, for videos people and VLMs watch: about 3x cheaper in software rendering, a
+mean pixel difference of about 2/255 from LIBERO's frame (edges and the table's reflection;
+`benchmarks/render_cost.py` measures both).
 
 Culling (fast quality only): a software renderer pays for every triangle it is given, seen or
 not (a LIBERO scene: ~345k triangles, most of a frame's cost), and MuJoCo hands it every
@@ -28,7 +39,11 @@ import numpy as np
 
 CAMERAS = ("agentview", "robot0_eye_in_hand")
 QUALITIES = ("standard", "fast")
-HIDDEN_GROUP = 5  # the renderer's default mjvOption draws geom groups 0-2 only
+# 1: drew robosuite's collision geometry (geom group 0) over the visual meshes; 2: LIBERO's frame
+RENDERER_VERSION = 2
+LIBERO_GEOM_GROUPS = (0, 1, 1, 0, 0, 0)  # robosuite's offscreen vopt: collision hidden, visual shown
+LIBERO_MAX_GEOM = 1000  # robosuite's MjvScene size: a scene past it drops geoms in LIBERO too
+HIDDEN_GROUP = 5  # a group neither LIBERO nor we draw
 
 # Every open renderer of this process, closed at exit. MuJoCo registers `eglTerminate` with
 # atexit when it makes its first EGL context; a renderer still open after that (a worker's
@@ -44,6 +59,15 @@ def close_all() -> None:
     """Close every renderer of this process (idempotent; runs at interpreter exit)."""
     for r in list(_OPEN):
         r.close()
+
+
+def libero_scene_option():
+    """The `MjvOption` robosuite's offscreen context renders LIBERO with (base.py sets the groups)."""
+    import mujoco
+
+    option = mujoco.MjvOption()
+    option.geomgroup[:] = LIBERO_GEOM_GROUPS
+    return option
 
 
 class FrameRenderer:
@@ -67,8 +91,9 @@ class FrameRenderer:
         samples = model.vis.quality.offsamples
         if self.fast:  # multisampling is fixed when the GL context is made
             model.vis.quality.offsamples = 0
+        self._option = libero_scene_option()
         try:
-            self._renderer = mujoco.Renderer(model, height=size, width=size)
+            self._renderer = mujoco.Renderer(model, height=size, width=size, max_geom=LIBERO_MAX_GEOM)
         finally:
             model.vis.quality.offsamples = samples
         global _hook_registered
@@ -81,13 +106,13 @@ class FrameRenderer:
         """HxWx3 uint8 image of `camera` for the current `data` (call mj_forward first)."""
         outside = self._outside(data, camera) if self.cull else None
         if outside is None or not outside.any():
-            self._renderer.update_scene(data, camera=camera)
+            self._renderer.update_scene(data, camera=camera, scene_option=self._option)
         else:  # hide them for this scene update only (the model may be the physics' own)
             groups = self._model.geom_group
             saved = groups[outside]
             groups[outside] = HIDDEN_GROUP
             try:
-                self._renderer.update_scene(data, camera=camera)
+                self._renderer.update_scene(data, camera=camera, scene_option=self._option)
             finally:
                 groups[outside] = saved
         if self.fast:
