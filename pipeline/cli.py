@@ -71,9 +71,13 @@ def tasks(suite: list[str] = typer.Option(None, "--suite", "-s", help=f"one of {
 
 
 @app.command()
-def stage1(config: Path = CONFIG, dry_run: bool = DRY) -> None:
+def stage1(config: Path = CONFIG, dry_run: bool = DRY,
+           rerender: bool = typer.Option(False, "--rerender", help="redraw the run's existing frames (videos, "
+                                         "history frames) made by an older renderer from the logged states; "
+                                         "no physics is run")) -> None:
     """Stage 1: run failure-generator policies, record states, render failure videos."""
-    _call("pipeline.stage1.run:run", _load(config, dry_run))
+    cfg = _load(config, dry_run)
+    _call("pipeline.stage1.rerender:run" if rerender else "pipeline.stage1.run:run", cfg)
 
 
 @app.command()

@@ -33,7 +33,7 @@ import numpy as np
 import pyarrow.parquet as pq
 from rich.console import Console
 
-from pipeline.atomic import write_json, write_with
+from pipeline.atomic import Completions, write_json, write_with
 from pipeline.config import Config
 from pipeline.errors import ConfigError, FatalError
 from pipeline.layout import EpisodeFiles, RunLayout, episode_key
@@ -44,6 +44,7 @@ from pipeline.release.scene_physics import scene_task
 from pipeline.runner import Stage, UnitResult, WorkerContext
 from pipeline.sim import SimEnv, TaskSpec, get_task
 from pipeline.sim.pool import model_key
+from pipeline.sim.render import RENDERER_VERSION
 from pipeline.sim.rotations import mat_to_quat
 
 
@@ -215,6 +216,9 @@ class ExportStage(Stage[ExportUnit]):
     def group(self, unit: ExportUnit) -> tuple[str, str]:
         return unit.model
 
+    def fingerprint(self, unit: ExportUnit) -> dict:
+        return {"renderer_version": RENDERER_VERSION}
+
     def process(self, unit: ExportUnit, ctx: WorkerContext) -> UnitResult:
         ep = unit.episode
         env = ctx.env(ep.spec())
@@ -227,12 +231,26 @@ class ExportStage(Stage[ExportUnit]):
         return UnitResult.set_aside(type(error).__name__, f"{unit.episode.key}: {error}")
 
 
+def refuse_old_renders(stage: ExportStage, units: list[ExportUnit]) -> None:
+    """An export resumed over episodes drawn by an older renderer would mix two looks in one
+    training set (markers of those carry no renderer version): refuse, naming the fix."""
+    marks = Completions(stage.root)
+    old = [u for u in units if marks.is_done(stage.marker_id(u))
+           and ((marks.info(stage.marker_id(u)) or {}).get("inputs") or {}).get("renderer_version") != RENDERER_VERSION]
+    if old:
+        raise FatalError(f"export-lerobot {Path(stage.dataset).name}: {len(old)} episode(s) in {stage.dataset} were "
+                         f"rendered by an older renderer (robosuite's collision geometry; now version {RENDERER_VERSION}); "
+                         f"delete {stage.dataset} and {stage.work} and run `recover export-lerobot --config <this "
+                         f"run's config>` again to re-render them")
+
+
 def export_dataset(episodes: list[ExportEpisode], root: Path, work: Path, size: int, runner,
                    quality: str = "standard") -> int:
     """Write one v2.1 dataset on `runner` (a `pipeline.runner.Runner`); return its frame count.
     Raises FatalError naming the episodes set aside (no meta files then)."""
     units, tasks = plan_units(episodes)
     stage = ExportStage(str(root), str(work), size, quality, units)
+    refuse_old_renders(stage, units)
     todo = runner.pending(stage, units)
     stats = runner.execute(stage, todo, done_before=len(units) - len(todo))
     if stats.set_aside:

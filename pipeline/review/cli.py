@@ -41,7 +41,15 @@ def serve(config: Path = CONFIG, host: str = typer.Option(None, help="default: s
     """Serve the review web page and API."""
     from pipeline.review.server import serve as run_server
 
+    from pipeline.errors import FatalError
+    from pipeline.rendered import require_current_frames, run_frame_tables
+
     cfg = _cfg(config)
+    try:  # reviewers judge these videos: never ones of the old renderer
+        require_current_frames(run_frame_tables(cfg), "the review server")
+    except FatalError as e:
+        typer.echo(f"FatalError {e}", err=True)
+        raise typer.Exit(2) from None
     host, port = host or cfg.stage3.host, port or cfg.stage3.port
     workers = workers or cfg.stage3.workers
     typer.echo(f"review page: http://{host}:{port}/  (run folder {cfg.out}, {workers} process(es))")

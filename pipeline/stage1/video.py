@@ -3,7 +3,8 @@
 Inputs: a `SimEnv` of the episode's task, the episode's `states.npy` array (row t = state
 before action t, last row = final state), cameras, fps (a divisor of the 20 Hz control
 rate) and resolution. Outputs: `video_<camera>.mp4` (H.264, yuv420p, `fps`) per camera and
-`frames.parquet` (`FRAME_SCHEMA`), all written atomically.
+`frames.parquet` (`FRAME_SCHEMA`, stamped with the renderer version: pipeline/rendered.py),
+all written atomically, the frame table last (it marks the videos complete).
 
 Invariants: frame i shows state row `i * 20 / fps`; the final state is always the last
 frame (its step is `steps`, possibly closer than one frame interval to the previous one);
@@ -24,6 +25,7 @@ from pipeline.atomic import atomic_path, write_with
 from pipeline.h264 import repeatable
 from pipeline.layout import EpisodeFiles, video_name
 from pipeline.records import FRAME_SCHEMA
+from pipeline.rendered import stamped
 from pipeline.sim import CONTROL_HZ, SimEnv
 
 
@@ -45,7 +47,7 @@ def frame_table(steps: list[int], control_hz: int = CONTROL_HZ) -> pa.Table:
             pa.array(np.asarray(steps, dtype=np.int32)),
             pa.array(np.asarray(steps, dtype=np.float64) / control_hz),
         ],
-        schema=FRAME_SCHEMA,
+        schema=stamped(FRAME_SCHEMA),
     )
 
 

@@ -11,8 +11,8 @@ first. `step_<NNNN>_history.npz` holds what is exactly reproducible (released, c
     gripper_qpos   (k, 2) float32
     actions        (k, 7) float32        the action the policy applied at that step
     sim_states     (k, state_dim) float64
-`step_<NNNN>_history_frames.npz` holds `steps` and one (k, S, S, 3) uint8 array per camera,
-rendered from `sim_states`, right side up. It is kept apart because software rendering is
+`step_<NNNN>_history_frames.npz` holds `steps`, `renderer_version` (pipeline/rendered.py) and
+one (k, S, S, 3) uint8 array per camera, rendered from `sim_states`, right side up. It is kept apart because software rendering is
 not bit-identical across processes (measured: ~14% of pixels differ on textured fixtures),
 so it cannot be part of a byte-reproducible release; anyone can re-render it from the states.
 Invariant: the onset state itself is not part of the history (it is the scene).
@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.atomic import write_with
+from pipeline.rendered import history_stamp
 
 
 def history_steps(onset: int, window: int, stride: int) -> list[int]:
@@ -48,8 +49,9 @@ def build_history(states: np.ndarray, step_rows: dict[str, np.ndarray], onset: i
 
 
 def render_frames(env, history: dict[str, np.ndarray], cameras: list[str], size: int) -> dict[str, np.ndarray]:
-    """Frames of a history's states, one (k, S, S, 3) array per camera (plus `steps`)."""
-    return {"steps": history["steps"], **env.render_states(history["sim_states"], cameras, size)}
+    """Frames of a history's states, one (k, S, S, 3) array per camera (plus `steps` and the
+    renderer version)."""
+    return {"steps": history["steps"], **history_stamp(), **env.render_states(history["sim_states"], cameras, size)}
 
 
 def write_history(path: Path, history: dict[str, np.ndarray]) -> None:

@@ -21,6 +21,7 @@ from pipeline.config import Config
 from pipeline.labelers.base import Episode, Onset
 from pipeline.layout import RunLayout, Stage2Layout
 from pipeline.records import EpisodeRecord, QuarantineReason
+from pipeline.rendered import require_current_frames
 
 BATCH = 32
 
@@ -37,6 +38,7 @@ def run_vlm(cfg: Config, episodes: list[EpisodeRecord], paths: Stage2Layout,
     todo = [r for r in episodes if not paths.abs(paths.vlm(r)).exists()]
     if not todo:
         return 0
+    require_current_frames([stage1.episode(r).frames for r in todo], f"stage 2's {cfg.stage2.vlm.backend} localizer")
     localizer = make_localizer(cfg.stage2.vlm)
     asked = 0
     try:

@@ -39,6 +39,7 @@ from pipeline.errors import FatalError
 from pipeline.executors.local import InlineExecutor
 from pipeline.layout import RunLayout, parse_key
 from pipeline.records import Characterization, QuarantineEntry, QuarantineReason
+from pipeline.rendered import require_current_frames, run_frame_tables
 from pipeline.review.db import write_session
 from pipeline.review.enqueue import enqueue
 from pipeline.review.proposal import VALUE_FIELDS, InvalidProposal
@@ -134,6 +135,8 @@ def run(cfg: Config) -> dict:
     stage = Stage3(cfg, engine_for(cfg), None)
     units = stage.units(cfg)
     todo = runner.pending(stage, units)
+    if todo:  # its items show the videos to reviewers (and a VLM characterizer watches them)
+        require_current_frames(run_frame_tables(cfg), "stage 3")
     counts: Counter = Counter(skipped=len(units) - len(todo))
     if not units:
         console.print(f"[yellow]stage 3: nothing to do[/yellow]: no stage-2 outputs under {layout.stage2.root}")

@@ -19,6 +19,7 @@ import pyarrow.parquet as pq
 
 from pipeline.atomic import write_json, write_with
 from pipeline.layout import RunLayout, episode_key
+from pipeline.rendered import stamped
 from pipeline.records import (EVIDENCE_SCHEMA, FRAME_SCHEMA, EventKind, Localization, Phases, QuarantineEntry,
                               QuarantineReason, SimEvent)
 
@@ -103,7 +104,7 @@ def build(run_dir: str | Path, n_episodes: int = 3, n_quarantined: int = 1, step
         n_frames = steps * fps // hz + 1
         frames = pa.table({"frame": pa.array(range(n_frames), pa.int32()),
                            "step": pa.array([f * hz // fps for f in range(n_frames)], pa.int32()),
-                           "time_s": pa.array([f / fps for f in range(n_frames)], pa.float64())}, schema=FRAME_SCHEMA)
+                           "time_s": pa.array([f / fps for f in range(n_frames)], pa.float64())}, schema=stamped(FRAME_SCHEMA))
         write_with(files.frames, lambda p, tb=frames: pq.write_table(tb, p))
         write_video(files.video("agentview"), n_frames, fps, video_size)
         if wrist:

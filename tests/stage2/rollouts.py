@@ -22,6 +22,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 
 from pipeline.atomic import write_json, write_with
+from pipeline.rendered import stamped
 from pipeline.records import FRAME_SCHEMA, STEP_SCHEMA, EpisodeRecord, episode_id, episodes_table
 
 SUITE = "libero_spatial"
@@ -87,7 +88,7 @@ def _write_episode(root: Path, env, plan_name: str, policy) -> tuple[EpisodeReco
         videos, fps = render_videos(env, arr, folder, ["agentview"], VIDEO_FPS, 64), VIDEO_FPS
     else:
         frames = [{"frame": i, "step": s, "time_s": s / 20} for i, s in enumerate(range(0, res.steps + 1, 20 // FPS))]
-        write_with(folder / "frames.parquet", lambda p: pq.write_table(pa.Table.from_pylist(frames, FRAME_SCHEMA), p))
+        write_with(folder / "frames.parquet", lambda p: pq.write_table(pa.Table.from_pylist(frames, stamped(FRAME_SCHEMA)), p))
     rec = EpisodeRecord(suite=SUITE, task=TASK, task_index=0, instruction=env.task.instruction, episode_id=ep,
                         init_state=0, policy=f"fixture_{plan_name}", policy_kind="scripted", seed=0, chunk_size=1,
                         horizon=HORIZON[plan_name], settle_steps=SETTLE, steps=res.steps, success=res.success,

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pyarrow as pa
 
+from pipeline.rendered import stamped
 from pipeline.records import FRAME_SCHEMA
 
 
@@ -37,5 +38,5 @@ def frames_table(n_frames: int, video_fps: int = 20, control_hz: int = 20) -> pa
     every = control_hz // video_fps
     steps = [i * every for i in range(n_frames)]
     return pa.table(
-        {"frame": list(range(n_frames)), "step": steps, "time_s": [s / control_hz for s in steps]}, schema=FRAME_SCHEMA
+        {"frame": list(range(n_frames)), "step": steps, "time_s": [s / control_hz for s in steps]}, schema=stamped(FRAME_SCHEMA)
     )
