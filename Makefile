@@ -9,7 +9,7 @@ CONFIG ?= configs/smoke.yaml
 # real-simulator tests run in parallel, one worker per core
 PYTEST_WORKERS ?= 2
 
-.PHONY: setup setup-test demo test stage1 stage2 stage3 review-status review-serve review-export bench-review release verify reproduce demos export-lerobot eval tasks bench clean
+.PHONY: setup setup-test demo test stage1 rerender stage2 stage3 review-status review-serve review-export bench-review release verify reproduce demos export-lerobot eval tasks bench clean
 
 # setup is idempotent: the stamp re-runs it only when its inputs change
 $(VENV)/.setup-stamp: pyproject.toml requirements/sim.txt scripts/setup.sh
@@ -33,6 +33,10 @@ test: setup-test
 
 stage1: setup
 	$(RECOVER) stage1 --config $(CONFIG)
+
+# redraw an existing run's frames with the current renderer (no physics)
+rerender: setup
+	$(RECOVER) stage1 --rerender --config $(CONFIG)
 
 stage2: setup
 	$(RECOVER) stage2 --config $(CONFIG)
