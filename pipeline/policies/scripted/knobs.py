@@ -11,7 +11,7 @@ import numpy as np
 
 from pipeline.policies.scripted.articulated import part_joint
 from pipeline.policies.scripted.primitives import Grip
-from pipeline.policies.scripted.skills import Ctx, Plan, free_hand, travel
+from pipeline.policies.scripted.motion import Ctx, Plan, free_hand, travel
 
 
 def bar_yaw(env, joint: str, geom: int) -> float:
@@ -37,9 +37,9 @@ def turn_knob(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:
         if s.satisfied(conjunct):
             return
         fr = env.joint_frame(joint)
-        q, anchor = fr["qpos"], fr["anchor"]
-        spin = float(np.sign(fr["axis"][2]))
-        goal_q = 0.9 if on else fr["range"][0] - 0.05
+        q, anchor = fr.qpos, fr.anchor
+        spin = float(np.sign(fr.axis[2]))
+        goal_q = 0.9 if on else fr.range[0] - 0.05
         boxes = env.joint_part_boxes(joint)
         top = int(np.argmax(boxes[:, 1, 2]))
         grip = boxes[top]
@@ -72,5 +72,5 @@ def turn_knob(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:
         ctx.yaw_hold = yaw + spin * dq
         yield ctx.move(s.eef() + [0, 0, 0.08], yaw=ctx.yaw_hold, tol=0.02, label="retreat")
         if ctx.truth is not None:
-            q_now = env.joint_frame(joint)["qpos"]
+            q_now = env.joint_frame(joint).qpos
             ctx.end("achieved" if s.satisfied(conjunct) else "not_turned", f"{joint} at {q_now:.3f}")

@@ -18,7 +18,8 @@ from collections.abc import Callable
 
 from pipeline.policies.scripted import articulated, insert, knobs
 from pipeline.policies.scripted.primitives import Move
-from pipeline.policies.scripted.skills import Ctx, Plan, free_hand, pick_place
+from pipeline.policies.scripted.motion import Ctx, Plan, free_hand
+from pipeline.policies.scripted.skills import pick_place
 
 PREDICATES = ("on", "in", "open", "close", "turnon", "turnoff")
 _ORDER = {"open": 0, "turnon": 1, "turnoff": 1, "on": 2, "in": 2, "close": 3}

@@ -15,7 +15,7 @@ from pipeline.policies.scripted.recovery.planner import recover
 from pipeline.policies.scripted.recovery.reasons import GiveUp, GiveUpReason
 from pipeline.policies.scripted.recovery.variation import RetryNoise, variation_levels
 from pipeline.policies.scripted.scene import Scene
-from pipeline.policies.scripted.skills import Ctx, Plan
+from pipeline.policies.scripted.motion import Ctx, Plan
 from pipeline.policies.scripted.truth import TruthLog
 from pipeline.sim import TaskSpec
 

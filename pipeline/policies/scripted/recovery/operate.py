@@ -5,7 +5,7 @@ part skills with a single attempt; a retry differs by `RetryNoise`'s shift."""
 from __future__ import annotations
 
 from pipeline.policies.scripted import articulated, drawer_room, knobs
-from pipeline.policies.scripted.skills import Ctx, Plan
+from pipeline.policies.scripted.motion import Ctx, Plan
 
 
 def operate_once(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:

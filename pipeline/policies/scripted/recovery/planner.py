@@ -32,7 +32,8 @@ from pipeline.policies.scripted.recovery.put_aside import put_aside
 from pipeline.policies.scripted.recovery.reasons import GiveUp, GiveUpReason
 from pipeline.policies.scripted.recovery.under_drawer import clear_from_under
 from pipeline.policies.scripted.recovery.variation import RetryNoise
-from pipeline.policies.scripted.skills import Ctx, Plan, destination
+from pipeline.policies.scripted.motion import Ctx, Plan
+from pipeline.policies.scripted.placement import destination
 from pipeline.policies.scripted.stack import carried
 
 OPEN_FULL = 0.85  # a drawer this far open (of its range) lets a hand reach all of its inside
@@ -75,7 +76,7 @@ def recover(ctx: Ctx, now: Callable[[], int], budget: int | None) -> Plan:
     aside: Counter = Counter()
     shut: Counter = Counter()  # drawers closed because they overhung a goal object
     keep = {n for c in goal for n in c[1:]}  # never moved aside: goal objects, targets and
-    keep |= {s.env.region(n)["parent"] for n in list(keep) if s.env.is_region(n)}  # their owners
+    keep |= {s.env.region(n).parent for n in list(keep) if s.env.is_region(n)}  # their owners
     while not s.env.goal_satisfied():
         if budget is not None and now() >= budget:
             raise GiveUp(GiveUpReason.TIMEOUT, f"step budget {budget} spent")
@@ -111,7 +112,7 @@ def recover(ctx: Ctx, now: Callable[[], int], budget: int | None) -> Plan:
             yield from clear_from_under(ctx, sub[1], over, shut[over] - 1)
             continue
         if sub[0] in ("on", "in") and held != sub[1] and not insert.can_insert(s, sub):
-            dest = destination(ctx, sub[1], sub[2])
+            dest = destination(ctx.scene, sub[1], sub[2])
             in_way = checks.blockers(s, sub[1], dest, keep)
             # whatever stands where the palm goes down: after a failed grasp; at once for a
             # flat object (the palm then comes down low, beside its neighbours) only what
@@ -154,10 +155,10 @@ def recover(ctx: Ctx, now: Callable[[], int], budget: int | None) -> Plan:
                 aside[o] += 1
                 again = next((g for g in goal if g[0] == "in" and g[1] == o), None)
                 fr = s.env.joint_frame(joint)
-                if abs(fr["qpos"]) < OPEN_FULL * float(np.max(np.abs(fr["range"]))):
+                if abs(fr.qpos) < OPEN_FULL * float(np.max(np.abs(fr.range))):
                     # the part of it under the cabinet cannot be reached from above: pull it out
                     _debug("open fully first", joint)
-                    yield from articulated._pull_drawer(ctx, joint)
+                    yield from articulated.pull_drawer(ctx, joint)
                     continue
                 if again is not None:
                     yield from pick_place_once(ctx, again, aside[o])

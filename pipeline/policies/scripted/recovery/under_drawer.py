@@ -22,7 +22,7 @@ from pipeline.policies.scripted.recovery import checks
 from pipeline.policies.scripted.recovery.operate import operate_once
 from pipeline.policies.scripted.recovery.put_aside import goal_points
 from pipeline.policies.scripted.recovery.reasons import GiveUp, GiveUpReason
-from pipeline.policies.scripted.skills import Ctx, Plan, free_hand, grasp, place_at, travel
+from pipeline.policies.scripted.motion import Ctx, Plan, free_hand, grasp, place_at, travel
 
 HAND_PAD_M = 0.01  # pushed this far past the object's edge
 # a drawer out at least this far is dragged out again by a fist behind its front wall (the
@@ -33,7 +33,7 @@ FIST_ROOM_M = 0.06
 def pull_side(env, joint: str) -> tuple[int, float]:
     """The world axis (0: x, 1: y) the drawer of `joint` opens along, and its sign."""
     fr = env.joint_frame(joint)
-    pull = fr["axis"] * open_sign(fr["range"])
+    pull = fr.axis * open_sign(fr.range)
     k = int(np.argmax(np.abs(pull[:2])))
     return k, float(np.sign(pull[k]))
 
@@ -91,7 +91,7 @@ def push_in(ctx: Ctx, joint: str, dist: float) -> Plan:
     """A fist at the drawer's front pushes it in by `dist` (the fist closes on the way)."""
     s, env = ctx.scene, ctx.scene.env
     fr = env.joint_frame(joint)
-    pull = fr["axis"] * open_sign(fr["range"])
+    pull = fr.axis * open_sign(fr.range)
     box, k, d = handle_box(env, joint, pull)
     front = box[1, k] if d > 0 else box[0, k]
     pos = (box[0] + box[1]) / 2
@@ -115,14 +115,14 @@ def clear_from_under(ctx: Ctx, obj: str, region: str, attempt: int = 0) -> Plan:
     s, env = ctx.scene, ctx.scene.env
     joint = part_joint(env, region)
     fr = env.joint_frame(joint)
-    sign = open_sign(fr["range"])
-    out = sign * fr["qpos"]  # how far out it is now
+    sign = open_sign(fr.range)
+    out = sign * fr.qpos  # how far out it is now
     dist = min(uncover_distance(ctx, obj, joint), out)
     ctx.begin("close", ("close", region), region)
     yield from push_in(ctx, joint, dist)
     covered = checks.overhanging_drawer(s, obj, pad=0.0) is not None
     if ctx.truth is not None:
-        ctx.end("half_open" if covered else "achieved", f"{joint} at {env.joint_frame(joint)['qpos']:.3f}")
+        ctx.end("half_open" if covered else "achieved", f"{joint} at {env.joint_frame(joint).qpos:.3f}")
     if covered:
         return
     sweep = checks.drawer_sweep(s, joint)
@@ -142,7 +142,7 @@ def clear_from_under(ctx: Ctx, obj: str, region: str, attempt: int = 0) -> Plan:
     yield from place_at(ctx, obj, spot)
     if sweep is not None and checks.under_sweep(s, obj, sweep):
         return  # still in the way: the planner decides again
-    if sign * env.joint_frame(joint)["qpos"] < FIST_ROOM_M:
+    if sign * env.joint_frame(joint).qpos < FIST_ROOM_M:
         yield from operate_once(ctx, ("open", region))
         return
     ctx.begin("open", ("open", region), region)
@@ -151,4 +151,4 @@ def clear_from_under(ctx: Ctx, obj: str, region: str, attempt: int = 0) -> Plan:
     yield from drag_out(ctx, joint)
     if ctx.truth is not None:
         ctx.end("achieved" if env.object_state(region).is_open() else "half_open",
-                f"{joint} at {env.joint_frame(joint)['qpos']:.3f}")
+                f"{joint} at {env.joint_frame(joint).qpos:.3f}")
