@@ -15,7 +15,9 @@ from __future__ import annotations
 import numpy as np
 
 from pipeline.sim.facts import JointKind
+from pipeline.policies.scripted.goal import Predicate
 from pipeline.policies.scripted.hand import FINGER_REACH  # (fingertip centre from the grip site, open)
+from pipeline.policies.scripted.notes import Outcome
 from pipeline.policies.scripted.primitives import Grip
 from pipeline.policies.scripted.motion import Ctx, Plan, free_hand, travel
 from pipeline.sim import SimEnv
@@ -63,10 +65,10 @@ def close_lower_first(env: SimEnv, steps: list[tuple[str, ...]]) -> list[tuple[s
 
     out = list(steps)
     for c in steps:
-        zc = slide_floor(c[1]) if c[0] == "close" else None
+        zc = slide_floor(c[1]) if c[0] == Predicate.CLOSE else None
         if zc is None:
             continue
-        above = [i for i, o in enumerate(out) if o[0] == "open" and (zo := slide_floor(o[1])) is not None and zo > zc]
+        above = [i for i, o in enumerate(out) if o[0] == Predicate.OPEN and (zo := slide_floor(o[1])) is not None and zo > zc]
         if above and above[0] < out.index(c):
             out.remove(c)
             out.insert(above[0], c)
@@ -107,7 +109,7 @@ def _operate_part(ctx: Ctx, conjunct: tuple[str, ...], opening: bool) -> Plan:
             yield from _swing_door(ctx, joint, opening=opening)
         if ctx.truth is not None:
             done = state.is_open() if opening else state.is_close()
-            ctx.end("achieved" if done else "half_open", f"{joint} at {env.joint_frame(joint).qpos:.3f}")
+            ctx.end(Outcome.ACHIEVED if done else Outcome.HALF_OPEN, f"{joint} at {env.joint_frame(joint).qpos:.3f}")
 
 
 def open_part(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:

@@ -15,6 +15,7 @@ import numpy as np
 
 from pipeline.sim.facts import JointKind
 from pipeline.policies.scripted.articulated import FINGER_HALF, front_panel, handle_box, open_sign, open_part, part_joint
+from pipeline.policies.scripted.notes import Outcome
 from pipeline.policies.scripted.primitives import Grip
 from pipeline.policies.scripted.motion import Ctx, Plan, travel
 from pipeline.policies.scripted.placement import place_room
@@ -53,7 +54,7 @@ def finish_opening(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:
     yield from drag_out(ctx, joint)
     if ctx.truth is not None:
         done = env.object_state(conjunct[1]).is_open()
-        ctx.end("achieved" if done else "half_open", f"{joint} at {env.joint_frame(joint).qpos:.3f}")
+        ctx.end(Outcome.ACHIEVED if done else Outcome.HALF_OPEN, f"{joint} at {env.joint_frame(joint).qpos:.3f}")
 
 
 def make_room(ctx: Ctx, conjunct: tuple[str, ...], obj: str) -> Plan:
@@ -66,7 +67,7 @@ def make_room(ctx: Ctx, conjunct: tuple[str, ...], obj: str) -> Plan:
         joint = part_joint(env, conjunct[1])
         yield from drag_out(ctx, joint)
         if ctx.truth is not None:
-            ctx.end("achieved" if not cramped(ctx, conjunct[1], obj) else "half_open",
+            ctx.end(Outcome.ACHIEVED if not cramped(ctx, conjunct[1], obj) else Outcome.HALF_OPEN,
                     f"{joint} at {env.joint_frame(joint).qpos:.3f}")
 
 

@@ -23,6 +23,8 @@ import numpy as np
 
 from pipeline.sim.facts import JointKind
 from pipeline.policies.scripted import articulated
+from pipeline.policies.scripted.goal import Predicate
+from pipeline.policies.scripted.notes import Halt, Note, Outcome
 from pipeline.policies.scripted.primitives import Grip
 from pipeline.policies.scripted.scene import robot_base
 from pipeline.policies.scripted.motion import Ctx, Plan, free_hand, grasp, place_at, travel
@@ -107,7 +109,7 @@ def opening(env, region: str) -> Opening | None:
 
 def roofed(env, conjunct: tuple[str, ...]) -> bool:
     """An `in` conjunct whose region can only be reached through a door opening."""
-    return conjunct[0] == "in" and env.is_region(conjunct[2]) and opening(env, conjunct[2]) is not None
+    return conjunct[0] == Predicate.IN and env.is_region(conjunct[2]) and opening(env, conjunct[2]) is not None
 
 
 @dataclass(frozen=True)
@@ -255,11 +257,11 @@ def insert(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:
         # handle faces the hand (a top-down grasp; the carry turns the hand's yaw)
         spot = staging_spot(s, obj, grip_rel, a, env.region(region).pos)
         if spot is None:
-            ctx.events.append(f"no_staging_spot:{obj}")
+            ctx.events.append(Note(Halt.NO_STAGING_SPOT, obj))
             return
         yield from grasp(ctx, obj, None)
         if s.holding_any() != obj:
-            ctx.events.append(f"missed_grasp:{obj}")
+            ctx.events.append(Note(Outcome.MISSED_GRASP, obj))
             if ctx.truth is not None:
                 ctx.truth.end_hand(obj, False)
             return
@@ -305,7 +307,7 @@ def insert(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:
     yield ctx.move(s.eef() + [0, 0, 0.05], gripper=1.0, yaw=yaw, approach=a, speed=0.5, tol=0.015,
                    max_steps=30, label="pick_lift")
     if s.holding_any() != obj:
-        ctx.events.append(f"missed_grasp:{obj}")
+        ctx.events.append(Note(Outcome.MISSED_GRASP, obj))
         if ctx.truth is not None:
             ctx.truth.end_hand(obj, False)
         return
@@ -329,7 +331,7 @@ def insert(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:
     goal[2] = carry_z
     yield ctx.move(goal, gripper=1.0, yaw=yaw, approach=a, speed=0.7, tol=0.01, max_steps=26, label="move_in")
     if s.holding_any() != obj:
-        ctx.events.append(f"dropped:{obj}")
+        ctx.events.append(Note(Outcome.DROPPED, obj))
     # released from FLOOR_MARGIN up: lowering first costs ~16 steps the episode lacks
     yield Grip(-1.0, ctx.open_steps, label="open")
     yield ctx.move(s.eef() - a * (STANDOFF_M + 0.02), yaw=yaw, approach=a, speed=0.5, tol=0.015, max_steps=50,

@@ -10,6 +10,8 @@ from __future__ import annotations
 import numpy as np
 
 from pipeline.policies.scripted.articulated import part_joint
+from pipeline.policies.scripted.goal import Predicate
+from pipeline.policies.scripted.notes import Outcome
 from pipeline.policies.scripted.primitives import Grip
 from pipeline.policies.scripted.motion import Ctx, Plan, free_hand, travel
 
@@ -32,7 +34,7 @@ def turn_knob(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:
     joint = part_joint(env, conjunct[1])
     if joint is None:
         raise ValueError(f"{conjunct}: no knob joint in task {env.task.task_id}")
-    on = conjunct[0] == "turnon"
+    on = conjunct[0] == Predicate.TURNON
     for _ in range(ctx.max_attempts):
         if s.satisfied(conjunct):
             return
@@ -73,4 +75,4 @@ def turn_knob(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:
         yield ctx.move(s.eef() + [0, 0, 0.08], yaw=ctx.yaw_hold, tol=0.02, label="retreat")
         if ctx.truth is not None:
             q_now = env.joint_frame(joint).qpos
-            ctx.end("achieved" if s.satisfied(conjunct) else "not_turned", f"{joint} at {q_now:.3f}")
+            ctx.end(Outcome.ACHIEVED if s.satisfied(conjunct) else Outcome.NOT_TURNED, f"{joint} at {q_now:.3f}")

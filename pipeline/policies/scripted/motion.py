@@ -19,6 +19,7 @@ import numpy as np
 
 from pipeline.policies.scripted.grasps import object_frame_boxes, plan_grasp
 from pipeline.policies.scripted.noise import Noise
+from pipeline.policies.scripted.notes import Note, Outcome
 from pipeline.policies.scripted.placement import carried_foot, sweep_clearance
 from pipeline.policies.scripted.primitives import Grip, Move, Primitive
 from pipeline.policies.scripted.scene import Scene
@@ -43,7 +44,7 @@ class Ctx:
     open_steps: int = 8
     yaw_hold: float = 0.0  # hand yaw while carrying (the yaw it grasped with)
     approach_hold: np.ndarray | None = None  # set while the hand is tilted (drawer handles)
-    events: list[str] = field(default_factory=list)  # what went wrong, in order (for reports)
+    events: list[Note] = field(default_factory=list)  # what went wrong, in order (for reports)
     truth: TruthLog | None = None  # the generator's own record (None: not recorded)
 
     def note(self, **noise) -> None:
@@ -168,7 +169,7 @@ def place_at(ctx: Ctx, obj: str, xy: np.ndarray, below: float = np.inf, stand: b
         ctx.yaw_hold = yaw  # the release and retreat keep the turned yaw
         yield ctx.move(s.eef(), gripper=1.0, yaw=yaw, tol=0.02, rot_tol=0.05, max_steps=30, label="turn")
     if not carried(s, obj):
-        ctx.events.append(f"dropped:{obj}")
+        ctx.events.append(Note(Outcome.DROPPED, obj))
         if ctx.truth is not None:
             ctx.truth.end_hand(obj, False)
         return

@@ -82,7 +82,7 @@ class ScriptedPolicy:
     @property
     def events(self) -> list[str]:
         """What went wrong so far this episode (missed grasps, drops, misplacements)."""
-        return list(self._ctx.events) if self._ctx is not None else []
+        return [str(n) for n in self._ctx.events] if self._ctx is not None else []
 
     def on_step(self, step: int, action: np.ndarray) -> None:
         """Called by the runner's recorder after each executed step: the truth log's trace."""

@@ -19,6 +19,7 @@ import numpy as np
 from pipeline.policies.scripted.grasps import SLAB_THIN_M, is_upright_slab
 
 from pipeline.policies.scripted.hand import closing_yaw
+from pipeline.policies.scripted.notes import Note, Outcome
 from pipeline.policies.scripted.primitives import Grip
 from pipeline.policies.scripted.motion import CARRY_CLEARANCE, Ctx, Plan, travel
 from pipeline.policies.scripted.placement import region_box
@@ -140,7 +141,7 @@ def slide_into_shelf(ctx: Ctx, obj: str, target: str, into: np.ndarray) -> Plan:
     yield ctx.move(ready + [0, 0, 0.03], gripper=1.0, speed=0.4, yaw=yaw, approach=into, tol=0.012, rot_tol=0.08,
                    max_steps=80, label="tilt")
     if not s.holding(obj):  # (the palm may also touch a neighbour: holding_any could name it)
-        ctx.events.append(f"dropped:{obj}")
+        ctx.events.append(Note(Outcome.DROPPED, obj))
         ctx.approach_hold = None
         return
     yield ctx.move(ready, gripper=1.0, speed=0.4, yaw=yaw, approach=into, tol=0.008, max_steps=40, label="level")

@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from pipeline.policies.scripted.motion import Ctx, Plan, free_hand, grasp, place_at
+from pipeline.policies.scripted.notes import Note, Outcome
 from pipeline.policies.scripted.placement import destination, place_choice, support_ceiling
 from pipeline.policies.scripted.stack import carried
 from pipeline.policies.scripted.strategies import PLACEMENTS
@@ -46,7 +47,7 @@ def pick_place(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:
             yield from free_hand(ctx)
             yield from grasp(ctx, obj, destination(ctx.scene, obj, target))
             if not carried(s, obj):
-                ctx.events.append(f"missed_grasp:{obj}")
+                ctx.events.append(Note(Outcome.MISSED_GRASP, obj))
                 if ctx.truth is not None:  # held for a while, then gone: a lost grasp, not a miss
                     ctx.truth.end_hand(obj, False)
                 continue
@@ -54,4 +55,4 @@ def pick_place(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:
         if ctx.truth is not None:  # a no-op when place already ended the attempt
             ctx.truth.end_hand(obj, s.satisfied(conjunct))
         if not s.satisfied(conjunct) and not carried(s, obj):
-            ctx.events.append(f"misplaced:{obj}")
+            ctx.events.append(Note(Outcome.MISPLACED, obj))

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pipeline.policies.scripted.notes import Note, Outcome
 from pipeline.policies.scripted.primitives import Grip
 from pipeline.policies.scripted.motion import Ctx, Plan, travel
 from pipeline.policies.scripted.placement import region_box
@@ -144,7 +145,7 @@ def slide_in(ctx: Ctx, obj: str, comp: Compartment) -> Plan:
     yield ctx.move(hand_for(stage[:2], carry_z), gripper=1.0, speed=0.5, yaw=yaw, tol=0.01, max_steps=60,
                    label="stage")
     if not carried(s, obj):
-        ctx.events.append(f"dropped:{obj}")
+        ctx.events.append(Note(Outcome.DROPPED, obj))
         return
     yield ctx.move(hand_for(final[:2], carry_z), gripper=1.0, speed=0.4, yaw=yaw, tol=0.01, max_steps=90,
                    label="slide_in")

@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from pipeline.policies.scripted.grasps import is_upright_slab
+from pipeline.policies.scripted.notes import Note, Outcome
 from pipeline.policies.scripted.primitives import Grip
 from pipeline.policies.scripted.motion import CARRY_CLEARANCE, Ctx, Plan, travel
 from pipeline.policies.scripted.placement import region_box
@@ -106,7 +107,7 @@ def place_in_slot(ctx: Ctx, obj: str, target: str, angle: float) -> Plan:
     ctx.yaw_hold = yaw
     yield ctx.move(over, gripper=1.0, speed=0.5, yaw=yaw, tol=0.006, rot_tol=0.04, max_steps=60, label="align")
     if s.holding_any() != obj:
-        ctx.events.append(f"dropped:{obj}")
+        ctx.events.append(Note(Outcome.DROPPED, obj))
         if ctx.truth is not None:
             ctx.truth.end_hand(obj, False)
         return

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from pipeline.sim.facts import JointKind
+from pipeline.policies.scripted.goal import PUT
 from pipeline.policies.scripted.recovery.reasons import GiveUpReason
 from pipeline.policies.scripted.scene import Scene, robot_base
 from pipeline.policies.scripted.grasps import plan_grasp
@@ -33,7 +34,7 @@ LIFT_COST = 1.0  # metres of travel one metre of lift over obstacles is worth, c
 
 def moved_objects(scene: Scene) -> list[str]:
     """Objects the goal moves (first argument of `on` / `in`)."""
-    return [c[1] for c in scene.env.goal if c[0] in ("on", "in") and c[1] in scene.env.object_names]
+    return [c[1] for c in scene.env.goal if c[0] in PUT and c[1] in scene.env.object_names]
 
 
 def hopeless(scene: Scene, objects: list[str]) -> tuple[GiveUpReason, str] | None:

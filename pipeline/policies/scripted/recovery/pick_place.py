@@ -10,6 +10,7 @@ calls it again from the live state.
 from __future__ import annotations
 
 from pipeline.policies.scripted.grasps import plan_grasp
+from pipeline.policies.scripted.notes import Note, Outcome
 from pipeline.policies.scripted.recovery import checks
 from pipeline.policies.scripted.recovery.long_grasp import lying_long, slide_clear
 from pipeline.policies.scripted.recovery.lying_cup import grasp_by_handle, lying_handle_grasp, place_by_handle
@@ -49,7 +50,7 @@ def pick_place_once(ctx: Ctx, conjunct: tuple[str, ...], attempt: int) -> Plan:
             yield from grasp(ctx, obj, dest, choice=choice, g=slide_clear(s, obj, plan_grasp(s, obj, dest, choice)),
                              hover_m=0.08 + 0.03 * min(attempt, 2), turn_tol=TURN_TOL)
         if not carried(s, obj, checks.held(s)):
-            ctx.events.append(f"missed_grasp:{obj}")
+            ctx.events.append(Note(Outcome.MISSED_GRASP, obj))
             if ctx.truth is not None:
                 ctx.truth.end_hand(obj, False)
             return
@@ -65,4 +66,4 @@ def pick_place_once(ctx: Ctx, conjunct: tuple[str, ...], attempt: int) -> Plan:
     if ctx.truth is not None:
         ctx.truth.end_hand(obj, s.satisfied(conjunct))
     if not s.satisfied(conjunct) and not carried(s, obj, checks.held(s)):
-        ctx.events.append(f"misplaced:{obj}")
+        ctx.events.append(Note(Outcome.MISPLACED, obj))

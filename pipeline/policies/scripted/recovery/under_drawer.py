@@ -16,7 +16,9 @@ import numpy as np
 
 from pipeline.policies.scripted.articulated import FINGER_HALF, handle_box, open_sign, part_joint
 from pipeline.policies.scripted.drawer_room import drag_out
+from pipeline.policies.scripted.goal import Conjunct, Predicate
 from pipeline.policies.scripted.grasps import plan_grasp
+from pipeline.policies.scripted.notes import Outcome
 from pipeline.policies.scripted.primitives import Grip
 from pipeline.policies.scripted.recovery import checks
 from pipeline.policies.scripted.recovery.operate import operate_once
@@ -118,11 +120,11 @@ def clear_from_under(ctx: Ctx, obj: str, region: str, attempt: int = 0) -> Plan:
     sign = open_sign(fr.range)
     out = sign * fr.qpos  # how far out it is now
     dist = min(uncover_distance(ctx, obj, joint), out)
-    ctx.begin("close", ("close", region), region)
+    ctx.begin("close", Conjunct(Predicate.CLOSE, region), region)
     yield from push_in(ctx, joint, dist)
     covered = checks.overhanging_drawer(s, obj, pad=0.0) is not None
     if ctx.truth is not None:
-        ctx.end("half_open" if covered else "achieved", f"{joint} at {env.joint_frame(joint).qpos:.3f}")
+        ctx.end(Outcome.HALF_OPEN if covered else Outcome.ACHIEVED, f"{joint} at {env.joint_frame(joint).qpos:.3f}")
     if covered:
         return
     sweep = checks.drawer_sweep(s, joint)
@@ -143,12 +145,12 @@ def clear_from_under(ctx: Ctx, obj: str, region: str, attempt: int = 0) -> Plan:
     if sweep is not None and checks.under_sweep(s, obj, sweep):
         return  # still in the way: the planner decides again
     if sign * env.joint_frame(joint).qpos < FIST_ROOM_M:
-        yield from operate_once(ctx, ("open", region))
+        yield from operate_once(ctx, Conjunct(Predicate.OPEN, region))
         return
-    ctx.begin("open", ("open", region), region)
+    ctx.begin("open", Conjunct(Predicate.OPEN, region), region)
     # close the fist while rising off the set-aside object (drag_out closes it standing still)
     yield ctx.move(s.eef() + [0, 0, 0.06], gripper=1.0, yaw=ctx.yaw_hold, tol=0.02, max_steps=12, label="fist")
     yield from drag_out(ctx, joint)
     if ctx.truth is not None:
-        ctx.end("achieved" if env.object_state(region).is_open() else "half_open",
+        ctx.end(Outcome.ACHIEVED if env.object_state(region).is_open() else Outcome.HALF_OPEN,
                 f"{joint} at {env.joint_frame(joint).qpos:.3f}")
