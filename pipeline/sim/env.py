@@ -373,6 +373,18 @@ class SimEnv:
         d = self.env.sim.data
         return np.array(d.site_xpos[robot.eef_site_id]), np.array(d.site_xmat[robot.eef_site_id]).reshape(3, 3)
 
+    def robot_base(self) -> np.ndarray:
+        """World position (3,) of the robot's base body (planners measure reach from it)."""
+        sim = self.env.sim
+        return np.array(sim.data.body_xpos[sim.model.body_name2id("robot0_base")])
+
+    def arm_joints(self) -> tuple[np.ndarray, np.ndarray]:
+        """The arm's joint positions (7,) and limits (7, 2), base to wrist."""
+        sim = self.env.sim
+        m = sim.model
+        ids = [m.joint_name2id(f"robot0_joint{i}") for i in range(1, 8)]
+        return np.array([sim.data.qpos[m.jnt_qposadr[j]] for j in ids]), np.array([m.jnt_range[j] for j in ids])
+
     def eef_hand_quat(self) -> np.ndarray:
         """robosuite's `robot0_eef_quat` (x, y, z, w): MuJoCo's quaternion of the hand body,
         with MuJoCo's sign, which VLA policies trained on LIBERO data expect in their state

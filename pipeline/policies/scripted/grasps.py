@@ -10,6 +10,8 @@ landing spots are probed with vertical rays through the live scene.
 
 from __future__ import annotations
 
+from collections.abc import Callable
+
 import numpy as np
 
 from pipeline.policies.scripted.hand import FINGER_REACH, Grasp, closing_axis, closing_yaw
@@ -102,17 +104,14 @@ def handle_grasp(scene: Scene, obj: str) -> Grasp | None:
     return Grasp(pos=pos, yaw=yaw, rim=False)
 
 
-def plan_grasp(scene: Scene, obj: str, dest: np.ndarray | None = None, choice: int = 0) -> Grasp:
-    """`dest` (x, y, support top) is where the object's body goes next: the hand must fit
-    there too, so rim sides that would put the hand into a wall at the target lose.
-    `choice` k > 0 takes the k-th best candidate instead of the best (a retry after a
-    failed grasp tries another yaw or rim side, not the same one again)."""
+def whole_grasp(scene: Scene, obj: str, dest: np.ndarray | None, choice: int) -> Grasp | None:
+    """Around the object's middle, across its narrowest closing direction that fits between
+    the fingers (little wrist turn preferred); None when no direction fits."""
     box = scene.box(obj)
     corners = scene.env.object_corners(obj)
     centre = box.centre
     h = box.size[2]
     floor = box.lo[2] + TABLE_MARGIN
-    # whole-object grasp: narrowest closing direction that fits
     widths = [(float(np.ptp(corners[:, :2] @ closing_axis(y)[:2])), y) for y in YAWS]
     fitting = []
     slab = is_upright_slab(scene, obj)
@@ -138,13 +137,27 @@ def plan_grasp(scene: Scene, obj: str, dest: np.ndarray | None = None, choice: i
         fitting.append((w + 0.02 * abs(yaw) + 10 * block, len(fitting), Grasp(pos=pos, yaw=float(yaw), rim=False)))
     if fitting:
         return sorted(fitting, key=lambda f: f[:2])[choice % len(fitting)][2]
+    return None
+
+
+def tall_handle_grasp(scene: Scene, obj: str, dest: np.ndarray | None, choice: int) -> Grasp | None:
+    """A moka pot's handle (`handle_grasp`) on even choices; its rim on odd ones (a retry)."""
     handle = handle_grasp(scene, obj)
-    if handle is not None and choice % 2 == 0:
-        return handle
-    pan = pan_handle_grasp(scene, obj)  # a frying pan: always by its handle
-    if pan is not None:
-        return pan
-    # rim grasp: radial direction whose outer finger lands clear
+    return handle if handle is not None and choice % 2 == 0 else None
+
+
+def pan_grasp(scene: Scene, obj: str, dest: np.ndarray | None, choice: int) -> Grasp | None:
+    """A frying pan: always by its handle (pan_handle.py)."""
+    return pan_handle_grasp(scene, obj)
+
+
+def rim_grasp(scene: Scene, obj: str, dest: np.ndarray | None, choice: int) -> Grasp:
+    """By the rim wall: the radial direction whose outer finger lands clear (and, with
+    `dest`, whose hand fits at the destination too)."""
+    box = scene.box(obj)
+    corners = scene.env.object_corners(obj)
+    centre = box.centre
+    floor = box.lo[2] + TABLE_MARGIN
     ranked = []
     for theta in np.linspace(-np.pi, np.pi, 16, endpoint=False):
         u = np.array([np.cos(theta), np.sin(theta), 0.0])
@@ -164,3 +177,20 @@ def plan_grasp(scene: Scene, obj: str, dest: np.ndarray | None = None, choice: i
         ranked.append((score, len(ranked), Grasp(pos=p, yaw=float(yaw), rim=True)))
     ranked.sort(key=lambda r: r[:2])
     return ranked[choice % len(ranked)][2]
+
+
+# the grasp strategies, asked in order: the first that gives a grasp is taken (the last always does)
+GRASPS: tuple[Callable[[Scene, str, np.ndarray | None, int], Grasp | None], ...] = (
+    whole_grasp, tall_handle_grasp, pan_grasp, rim_grasp)
+
+
+def plan_grasp(scene: Scene, obj: str, dest: np.ndarray | None = None, choice: int = 0) -> Grasp:
+    """`dest` (x, y, support top) is where the object's body goes next: the hand must fit
+    there too, so rim sides that would put the hand into a wall at the target lose.
+    `choice` k > 0 takes the k-th best candidate instead of the best (a retry after a
+    failed grasp tries another yaw or rim side, not the same one again)."""
+    for strategy in GRASPS:
+        g = strategy(scene, obj, dest, choice)
+        if g is not None:
+            return g
+    raise AssertionError("rim_grasp always answers")

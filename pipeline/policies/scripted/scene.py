@@ -120,5 +120,4 @@ class Scene:
 
 def robot_base(scene: Scene) -> np.ndarray:
     """World position of the robot's base (both experts measure reach from it)."""
-    sim = scene.env.env.sim
-    return np.array(sim.data.body_xpos[sim.model.body_name2id("robot0_base")])
+    return scene.env.robot_base()

@@ -45,7 +45,7 @@ def open_side(ctx: Ctx, obj: str, target: str) -> np.ndarray | None:
         walls = env.object_boxes(env.region(target).parent)
     except KeyError:
         return None
-    base = env.env.sim.data.body_xpos[env.env.sim.model.body_name2id("robot0_base")][:2]
+    base = env.robot_base()[:2]
     open_sides = []
     for d in (np.array([1.0, 0, 0]), np.array([-1.0, 0, 0]), np.array([0, 1.0, 0]), np.array([0, -1.0, 0])):
         face = centre + d * half

@@ -60,12 +60,8 @@ def hopeless(scene: Scene, objects: list[str]) -> tuple[GiveUpReason, str] | Non
 def awkward_arm(scene: Scene) -> bool:
     """An arm joint near its limit, the grip site outside the comfortable region, or the
     hand tilted away from pointing down: approaches from here go wrong."""
-    sim = scene.env.env.sim
-    m = sim.model
-    for i in range(1, 8):
-        j = m.joint_name2id(f"robot0_joint{i}")
-        lo, hi = m.jnt_range[j]
-        q = sim.data.qpos[m.jnt_qposadr[j]]
+    qs, limits = scene.env.arm_joints()
+    for q, (lo, hi) in zip(qs, limits):
         if lo < hi and min(q - lo, hi - q) < JOINT_MARGIN:
             return True
     eef, rot = scene.env.eef_pose()
@@ -77,10 +73,8 @@ def awkward_arm(scene: Scene) -> bool:
 
 def _elbow_slack(scene: Scene) -> float:
     """Radians the elbow (joint 4) can still straighten before its limit."""
-    sim = scene.env.env.sim
-    m = sim.model
-    j = m.joint_name2id("robot0_joint4")
-    return float(m.jnt_range[j][1] - sim.data.qpos[m.jnt_qposadr[j]])
+    qs, limits = scene.env.arm_joints()
+    return float(limits[3][1] - qs[3])
 
 
 def held(scene: Scene) -> str | None:
