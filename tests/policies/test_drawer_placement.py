@@ -9,11 +9,11 @@ import pytest
 
 from pipeline.config import ScriptedNoise
 from pipeline.policies.scripted.lay_down import too_tall
+from pipeline.policies.scripted.motion import Ctx
 from pipeline.policies.scripted.noise import Noise, episode_rng
+from pipeline.policies.scripted.placement import place_choice, region_box, turned_foot
 from pipeline.policies.scripted.recovery import make_recovery_expert
 from pipeline.policies.scripted.scene import Scene
-from pipeline.policies.scripted.motion import Ctx
-from pipeline.policies.scripted.placement import place_choice, region_box, turned_foot
 from pipeline.rollout import run_episode
 from pipeline.sim import build_env, tasks
 from tests.policies.failure_states import set_joint, start

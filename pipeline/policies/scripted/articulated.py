@@ -14,13 +14,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.sim.facts import JointKind
 from pipeline.policies.scripted.goal import Predicate
-from pipeline.policies.scripted.hand import FINGER_REACH  # (fingertip centre from the grip site, open)
+from pipeline.policies.scripted.motion import Ctx, Plan, free_hand, travel
 from pipeline.policies.scripted.notes import Outcome
 from pipeline.policies.scripted.primitives import Grip
-from pipeline.policies.scripted.motion import Ctx, Plan, free_hand, travel
 from pipeline.sim import SimEnv
+from pipeline.sim.facts import JointKind
 
 FINGER_HALF = 0.01  # half thickness of a closed finger pair along the closing axis
 LOW_DRAWER_M = 0.08  # a handle lower than this over the table: push with a pitched fist

@@ -13,12 +13,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.sim.facts import JointKind
 from pipeline.policies.scripted.articulated import FINGER_HALF, front_panel, handle_box, open_sign, open_part, part_joint
-from pipeline.policies.scripted.notes import Outcome
-from pipeline.policies.scripted.primitives import Grip
 from pipeline.policies.scripted.motion import Ctx, Plan, travel
+from pipeline.policies.scripted.notes import Outcome
 from pipeline.policies.scripted.placement import place_room
+from pipeline.policies.scripted.primitives import Grip
+from pipeline.sim.facts import JointKind
 
 END_M = 0.005  # a slide this close to the end of its range counts as fully out
 PART_WAY_M = 0.1  # out this far (most of the way: a pull stopped short), a fist fits behind the front wall

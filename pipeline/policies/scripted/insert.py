@@ -21,13 +21,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.sim.facts import JointKind
 from pipeline.policies.scripted import articulated
 from pipeline.policies.scripted.goal import Predicate
+from pipeline.policies.scripted.motion import Ctx, Plan, free_hand, grasp, place_at, travel
 from pipeline.policies.scripted.notes import Halt, Note, Outcome
 from pipeline.policies.scripted.primitives import Grip
 from pipeline.policies.scripted.scene import robot_base
-from pipeline.policies.scripted.motion import Ctx, Plan, free_hand, grasp, place_at, travel
+from pipeline.sim.facts import JointKind
 
 HANDLE_OUT_M = 0.06  # boxes of a mug this far (xy) from its centre of mass form the handle
 FLOOR_MARGIN = 0.025  # object's bottom above the container floor while moving in

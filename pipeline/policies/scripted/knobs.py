@@ -11,9 +11,9 @@ import numpy as np
 
 from pipeline.policies.scripted.articulated import part_joint
 from pipeline.policies.scripted.goal import Predicate
+from pipeline.policies.scripted.motion import Ctx, Plan, free_hand, travel
 from pipeline.policies.scripted.notes import Outcome
 from pipeline.policies.scripted.primitives import Grip
-from pipeline.policies.scripted.motion import Ctx, Plan, free_hand, travel
 
 
 def bar_yaw(env, joint: str, geom: int) -> float:

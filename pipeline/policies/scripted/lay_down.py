@@ -14,9 +14,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.policies.scripted.primitives import Grip
 from pipeline.policies.scripted.motion import Ctx, Plan, place_at
 from pipeline.policies.scripted.placement import region_box, support_ceiling
+from pipeline.policies.scripted.primitives import Grip
 
 WALL_GAP_M = 0.015  # standing footprint this far from the end wall
 TIP_PUSH_M = 0.10  # how far the fist pushes the top

@@ -18,8 +18,8 @@ from collections.abc import Callable
 
 from pipeline.policies.scripted import articulated, insert, knobs
 from pipeline.policies.scripted.goal import KNOB, PUT, Conjunct, Predicate
-from pipeline.policies.scripted.primitives import Move
 from pipeline.policies.scripted.motion import Ctx, Plan, free_hand
+from pipeline.policies.scripted.primitives import Move
 from pipeline.policies.scripted.skills import pick_place
 
 PREDICATES = tuple(Predicate)

@@ -16,11 +16,11 @@ import numpy as np
 
 from pipeline.config import ScriptedPolicyConfig
 from pipeline.policies.base import Observation
+from pipeline.policies.scripted.motion import Ctx, Plan
 from pipeline.policies.scripted.noise import Noise, episode_rng
 from pipeline.policies.scripted.planner import plan_episode
 from pipeline.policies.scripted.primitives import Primitive, emit
 from pipeline.policies.scripted.scene import Scene
-from pipeline.policies.scripted.motion import Ctx, Plan
 from pipeline.policies.scripted.truth import TruthLog
 from pipeline.sim import TaskSpec
 

@@ -19,10 +19,10 @@ import numpy as np
 from pipeline.policies.scripted.grasps import SLAB_THIN_M, is_upright_slab
 
 from pipeline.policies.scripted.hand import closing_yaw
-from pipeline.policies.scripted.notes import Note, Outcome
-from pipeline.policies.scripted.primitives import Grip
 from pipeline.policies.scripted.motion import CARRY_CLEARANCE, Ctx, Plan, travel
+from pipeline.policies.scripted.notes import Note, Outcome
 from pipeline.policies.scripted.placement import region_box
+from pipeline.policies.scripted.primitives import Grip
 from pipeline.policies.scripted.slot import footprint, has_roof
 
 PALM_HALF_M = 0.115  # grip site above the table when the hand points sideways

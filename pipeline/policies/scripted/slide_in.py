@@ -18,10 +18,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.policies.scripted.notes import Note, Outcome
-from pipeline.policies.scripted.primitives import Grip
 from pipeline.policies.scripted.motion import Ctx, Plan, travel
+from pipeline.policies.scripted.notes import Note, Outcome
 from pipeline.policies.scripted.placement import region_box
+from pipeline.policies.scripted.primitives import Grip
 from pipeline.policies.scripted.stack import carried
 
 HAND_ROOM_M = 0.15  # a board lower than this above the floor leaves no room to lower a hand in

@@ -17,10 +17,10 @@ from __future__ import annotations
 import numpy as np
 
 from pipeline.policies.scripted.grasps import is_upright_slab
-from pipeline.policies.scripted.notes import Note, Outcome
-from pipeline.policies.scripted.primitives import Grip
 from pipeline.policies.scripted.motion import CARRY_CLEARANCE, Ctx, Plan, travel
+from pipeline.policies.scripted.notes import Note, Outcome
 from pipeline.policies.scripted.placement import region_box
+from pipeline.policies.scripted.primitives import Grip
 
 FIT_MARGIN = 0.004  # slab edge to compartment wall, each side, at the least
 RELEASE_GAP = 0.008  # slab bottom above the compartment floor when the fingers open

@@ -15,11 +15,11 @@ from __future__ import annotations
 import numpy as np
 
 from pipeline.policies.scripted.hand import closing_yaw
+from pipeline.policies.scripted.motion import CARRY_CLEARANCE, Ctx, Plan, travel
+from pipeline.policies.scripted.placement import region_box
 from pipeline.policies.scripted.primitives import Grip
 from pipeline.policies.scripted.scene import TABLE_MARGIN
 from pipeline.policies.scripted.shelf import open_side
-from pipeline.policies.scripted.motion import CARRY_CLEARANCE, Ctx, Plan, travel
-from pipeline.policies.scripted.placement import region_box
 from pipeline.policies.scripted.slot import footprint
 
 STAND_OUT_M = 0.10  # book's footprint centre this far in front of the opening when stood up

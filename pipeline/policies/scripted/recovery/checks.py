@@ -5,13 +5,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.sim.facts import JointKind
 from pipeline.policies.scripted.goal import PUT
-from pipeline.policies.scripted.recovery.reasons import GiveUpReason
-from pipeline.policies.scripted.scene import Scene, robot_base
 from pipeline.policies.scripted.grasps import plan_grasp
 from pipeline.policies.scripted.hand import FINGER_REACH, closing_axis
 from pipeline.policies.scripted.placement import sweep_clearance
+from pipeline.policies.scripted.recovery.reasons import GiveUpReason
+from pipeline.policies.scripted.scene import Scene, robot_base
+from pipeline.sim.facts import JointKind
 
 OFF_TABLE_M = 0.06  # a body this far below the table top has fallen off it
 REACH_M = 0.95  # horizontal reach from the robot base the arm can still grasp at

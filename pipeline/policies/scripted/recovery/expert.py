@@ -7,6 +7,7 @@ from __future__ import annotations
 import numpy as np
 
 from pipeline.config import ScriptedPolicyConfig
+from pipeline.policies.scripted.motion import Ctx, Plan
 from pipeline.policies.scripted.noise import episode_rng
 from pipeline.policies.scripted.notes import Halt, Note
 from pipeline.policies.scripted.policy import ScriptedPolicy
@@ -16,7 +17,6 @@ from pipeline.policies.scripted.recovery.planner import recover
 from pipeline.policies.scripted.recovery.reasons import GiveUp, GiveUpReason
 from pipeline.policies.scripted.recovery.variation import RetryNoise, variation_levels
 from pipeline.policies.scripted.scene import Scene
-from pipeline.policies.scripted.motion import Ctx, Plan
 from pipeline.policies.scripted.truth import TruthLog
 from pipeline.sim import TaskSpec
 

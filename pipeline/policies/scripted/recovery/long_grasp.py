@@ -15,8 +15,8 @@ import numpy as np
 from pipeline.policies.scripted.grasps import LONG_M, blocked_depth
 
 from pipeline.policies.scripted.hand import Grasp, closing_axis
-from pipeline.policies.scripted.scene import Scene
 from pipeline.policies.scripted.placement import footprint_widths
+from pipeline.policies.scripted.scene import Scene
 
 BLOCKED_M = 0.01  # the palm's way blocked by more than this: slide the grasp
 SHIFTS = (0.015, 0.03, 0.045)  # along the object's length, either way, nearest first

@@ -18,10 +18,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from pipeline.policies.scripted.hand import closing_axis, closing_yaw
-from pipeline.policies.scripted.primitives import Grip
-from pipeline.policies.scripted.scene import TABLE_MARGIN, Scene
 from pipeline.policies.scripted.motion import CARRY_CLEARANCE, HAND_CLEARANCE, Ctx, Plan, travel
 from pipeline.policies.scripted.placement import place_xy, support_ceiling
+from pipeline.policies.scripted.primitives import Grip
+from pipeline.policies.scripted.scene import TABLE_MARGIN, Scene
 
 LYING_COS = 0.5  # the object's own up axis within 60 deg of horizontal: lying
 BAR_OUT_M = 0.06  # a handle's outer bar stands at least this far off the body's axis

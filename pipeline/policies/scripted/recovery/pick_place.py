@@ -10,15 +10,15 @@ calls it again from the live state.
 from __future__ import annotations
 
 from pipeline.policies.scripted.grasps import plan_grasp
+from pipeline.policies.scripted.motion import Ctx, Plan, free_hand, grasp
 from pipeline.policies.scripted.notes import Note, Outcome
+from pipeline.policies.scripted.placement import box_centre_offset, destination
 from pipeline.policies.scripted.recovery import checks
 from pipeline.policies.scripted.recovery.long_grasp import lying_long, slide_clear
 from pipeline.policies.scripted.recovery.lying_cup import grasp_by_handle, lying_handle_grasp, place_by_handle
 from pipeline.policies.scripted.recovery.stand_book import quarter_turn, stand_tilt, stand_up, too_steep
-from pipeline.policies.scripted.stack import carried
-from pipeline.policies.scripted.motion import Ctx, Plan, free_hand, grasp
-from pipeline.policies.scripted.placement import box_centre_offset, destination
 from pipeline.policies.scripted.skills import place
+from pipeline.policies.scripted.stack import carried
 
 TURN_TOL = 0.15  # radians of yaw still to turn at which the hand may go down to grasp
 

@@ -18,13 +18,13 @@ from pipeline.policies.scripted.articulated import FINGER_HALF, handle_box, open
 from pipeline.policies.scripted.drawer_room import drag_out
 from pipeline.policies.scripted.goal import Conjunct, Predicate
 from pipeline.policies.scripted.grasps import plan_grasp
+from pipeline.policies.scripted.motion import Ctx, Plan, free_hand, grasp, place_at, travel
 from pipeline.policies.scripted.notes import Outcome
 from pipeline.policies.scripted.primitives import Grip
 from pipeline.policies.scripted.recovery import checks
 from pipeline.policies.scripted.recovery.operate import operate_once
 from pipeline.policies.scripted.recovery.put_aside import goal_points
 from pipeline.policies.scripted.recovery.reasons import GiveUp, GiveUpReason
-from pipeline.policies.scripted.motion import Ctx, Plan, free_hand, grasp, place_at, travel
 
 HAND_PAD_M = 0.01  # pushed this far past the object's edge
 # a drawer out at least this far is dragged out again by a fist behind its front wall (the
