@@ -31,6 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pipeline.sim.facts import JointFrame, JointKind, Region
 from pipeline.sim.fast_step import FastStepper
 from pipeline.sim.libero_setup import ensure_libero_ready
 from pipeline.sim.registry import TaskSpec
@@ -253,6 +254,17 @@ class SimEnv:
             raise KeyError(f"no object or fixture {name!r} in task {self.task.task_id}")
         return self._geom_boxes(self._collision_geoms(bodies))
 
+    def body_geom_frames(self, name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The collision geoms of an object's own body (not the bodies below it): world
+        positions (k, 3), rotations (k, 3, 3) and local bounding boxes (k, 6: centre, half)."""
+        m = self.env.sim.model._model
+        d = self.env.sim.data._data
+        bid = self.env.obj_body_id[name]
+        geoms = self._collision_geoms({bid})
+        return (np.array([d.geom_xpos[g] for g in geoms]).reshape(-1, 3),
+                np.array([d.geom_xmat[g].reshape(3, 3) for g in geoms]).reshape(-1, 3, 3),
+                np.array([m.geom_aabb[g] for g in geoms]).reshape(-1, 6))
+
     def object_corners(self, name: str) -> np.ndarray:
         """(k*8, 3) world corners of the oriented boxes bounding an object's collision geoms."""
         m = self.env.sim.model._model
@@ -316,32 +328,31 @@ class SimEnv:
         m = self.env.sim.model._model
         return np.array([m.geom_aabb[g, 3:] for g in self._joint_part_geoms(joint)]).reshape(-1, 3)
 
-    def joint_frame(self, joint: str) -> dict:
-        """A joint's world `anchor` (3,), world `axis` (3,), `qpos`, `range` (2,) and
-        `kind` ('slide' or 'hinge')."""
+    def joint_frame(self, joint: str) -> JointFrame:
+        """A joint's world anchor and axis, its position, range and kind (slide or hinge)."""
         m = self.env.sim.model._model
         d = self.env.sim.data._data
         j = m.joint(joint).id
-        return {
-            "anchor": np.array(d.xanchor[j]),
-            "axis": np.array(d.xaxis[j]),
-            "qpos": float(d.qpos[m.jnt_qposadr[j]]),
-            "range": np.array(m.jnt_range[j]),
-            "kind": {2: "slide", 3: "hinge"}.get(int(m.jnt_type[j]), "other"),
-        }
+        return JointFrame(
+            anchor=np.array(d.xanchor[j]),
+            axis=np.array(d.xaxis[j]),
+            qpos=float(d.qpos[m.jnt_qposadr[j]]),
+            range=np.array(m.jnt_range[j]),
+            kind={2: JointKind.SLIDE, 3: JointKind.HINGE}.get(int(m.jnt_type[j]), JointKind.OTHER),
+        )
 
-    def region(self, name: str) -> dict:
+    def region(self, name: str) -> Region:
         """A region site: world position, rotation, half size, parent name and its joints."""
         site = self.env.object_sites_dict[name]
         sid = self.env.sim.model.site_name2id(name)
         d = self.env.sim.data
-        return {
-            "pos": np.array(d.site_xpos[sid]),
-            "mat": np.array(d.site_xmat[sid]).reshape(3, 3),
-            "size": np.array(site.size, dtype=float),
-            "parent": site.parent_name,
-            "joints": list(site.joints or []),
-        }
+        return Region(
+            pos=np.array(d.site_xpos[sid]),
+            mat=np.array(d.site_xmat[sid]).reshape(3, 3),
+            size=np.array(site.size, dtype=float),
+            parent=site.parent_name,
+            joints=tuple(site.joints or ()),
+        )
 
     @property
     def region_names(self) -> list[str]:
@@ -361,6 +372,18 @@ class SimEnv:
         robot = self.env.robots[0]
         d = self.env.sim.data
         return np.array(d.site_xpos[robot.eef_site_id]), np.array(d.site_xmat[robot.eef_site_id]).reshape(3, 3)
+
+    def robot_base(self) -> np.ndarray:
+        """World position (3,) of the robot's base body (planners measure reach from it)."""
+        sim = self.env.sim
+        return np.array(sim.data.body_xpos[sim.model.body_name2id("robot0_base")])
+
+    def arm_joints(self) -> tuple[np.ndarray, np.ndarray]:
+        """The arm's joint positions (7,) and limits (7, 2), base to wrist."""
+        sim = self.env.sim
+        m = sim.model
+        ids = [m.joint_name2id(f"robot0_joint{i}") for i in range(1, 8)]
+        return np.array([sim.data.qpos[m.jnt_qposadr[j]] for j in ids]), np.array([m.jnt_range[j] for j in ids])
 
     def eef_hand_quat(self) -> np.ndarray:
         """robosuite's `robot0_eef_quat` (x, y, z, w): MuJoCo's quaternion of the hand body,

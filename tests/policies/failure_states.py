@@ -7,10 +7,10 @@ from __future__ import annotations
 import numpy as np
 
 from pipeline.config import ScriptedNoise
+from pipeline.policies.scripted.motion import Ctx, grasp
 from pipeline.policies.scripted.noise import Noise
 from pipeline.policies.scripted.primitives import emit
 from pipeline.policies.scripted.scene import Scene
-from pipeline.policies.scripted.skills import Ctx, grasp
 from pipeline.sim import SimEnv
 
 

@@ -9,10 +9,11 @@ import pytest
 
 from pipeline.config import ScriptedNoise
 from pipeline.policies.scripted.lay_down import too_tall
+from pipeline.policies.scripted.motion import Ctx
 from pipeline.policies.scripted.noise import Noise, episode_rng
+from pipeline.policies.scripted.placement import place_choice, region_box, turned_foot
 from pipeline.policies.scripted.recovery import make_recovery_expert
 from pipeline.policies.scripted.scene import Scene
-from pipeline.policies.scripted.skills import Ctx, _place_choice, _turned_foot, region_box
 from pipeline.rollout import run_episode
 from pipeline.sim import build_env, tasks
 from tests.policies.failure_states import set_joint, start
@@ -31,10 +32,10 @@ def test_a_lying_wine_bottle_is_turned_along_the_drawer_to_fit_in_it():
         start(env)
         set_joint(env, "white_cabinet_1_bottom_level", -0.16)  # fully out
         ctx = ctx_for(env, task)
-        xy, blocked, turn = _place_choice(ctx, "wine_bottle_1", region)
+        xy, blocked, turn = place_choice(ctx.scene, "wine_bottle_1", region)
         # lying diagonally it fits nowhere; turned along the drawer's width it does
         assert blocked == 0 and turn != 0
-        size, shift = _turned_foot(ctx.scene, "wine_bottle_1", turn)
+        size, shift = turned_foot(ctx.scene, "wine_bottle_1", turn)
         assert size[0] > 2 * size[1]  # its length now runs along the drawer (world x)
         centre, half = region_box(env, region)
         assert np.all(np.abs(xy - centre[:2]) <= half[:2])  # the body origin LIBERO tests

@@ -32,8 +32,8 @@ def test_the_microwave_opening_faces_the_open_door_with_floor_below_roof(mug_tas
     op = insert.opening(env, MUG_IN[2])
     assert op is not None
     np.testing.assert_allclose(op.inward, [0.0, 1.0, 0.0])  # the door opens on the robot's -y side
-    assert op.front < env.region(MUG_IN[2])["pos"][1] < op.back
-    assert op.floor < env.region(MUG_IN[2])["pos"][2] < op.ceiling
+    assert op.front < env.region(MUG_IN[2]).pos[1] < op.back
+    assert op.floor < env.region(MUG_IN[2]).pos[2] < op.ceiling
     assert op.ceiling - op.floor < 0.15  # too low for a top-down hand above a 10 cm mug
     assert insert.can_insert(Scene(env), MUG_IN)
     assert not insert.roofed(env, ("close", "microwave_1"))

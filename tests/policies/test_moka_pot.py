@@ -7,7 +7,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.policies.scripted.grasps import closing_axis, handle_grasp
+from pipeline.policies.scripted.grasps import handle_grasp
+
+from pipeline.policies.scripted.hand import closing_axis
 from pipeline.policies.scripted.scene import Scene
 from pipeline.sim import build_env, tasks
 from tests.policies.failure_states import set_pose, start

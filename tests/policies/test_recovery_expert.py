@@ -57,7 +57,8 @@ def test_an_obstruction_on_the_placement_path_is_moved_aside_first(bowl_on_plate
 
 
 def test_a_grasp_whose_finger_lands_on_a_neighbour_is_passed_over_for_a_clear_one(bowl_on_plate):
-    from pipeline.policies.scripted.grasps import FINGER_REACH, closing_axis, plan_grasp
+    from pipeline.policies.scripted.grasps import plan_grasp
+    from pipeline.policies.scripted.hand import FINGER_REACH, closing_axis
 
     task, env = bowl_on_plate
     start(env)
@@ -137,16 +138,17 @@ def test_a_bowl_fits_the_white_cabinets_bottom_drawer_only_pulled_out_to_the_end
     from pipeline.config import ScriptedNoise
     from pipeline.policies.scripted.drawer_room import cramped
     from pipeline.policies.scripted.noise import Noise, episode_rng
-    from pipeline.policies.scripted.skills import Ctx, place_room
+    from pipeline.policies.scripted.motion import Ctx
+    from pipeline.policies.scripted.placement import place_room
 
     task, env = white_cabinet
     start(env)  # the drawer starts 14.6 cm out: open, but the bowl meets its front wall or the handles above
     ctx = Ctx(scene=Scene(env), noise=Noise(ScriptedNoise(), episode_rng(0, task.task_id)))
     region = "white_cabinet_1_bottom_region"
     assert env.object_state(region).is_open()
-    assert not place_room(ctx, "akita_black_bowl_1", region) and cramped(ctx, region, "akita_black_bowl_1")
+    assert not place_room(ctx.scene, "akita_black_bowl_1", region) and cramped(ctx, region, "akita_black_bowl_1")
     set_joint(env, "white_cabinet_1_bottom_level", -0.16)
-    assert place_room(ctx, "akita_black_bowl_1", region) and not cramped(ctx, region, "akita_black_bowl_1")
+    assert place_room(ctx.scene, "akita_black_bowl_1", region) and not cramped(ctx, region, "akita_black_bowl_1")
 
 
 def test_the_white_cabinets_low_bottom_drawer_is_pushed_shut():
@@ -201,7 +203,8 @@ def test_only_what_stands_under_the_palms_middle_blocks_a_flat_objects_first_gra
     # a tall bottle the palm's edge would brush is nudged by the descent (the plain grasp
     # succeeds); moving it first cost ~200 steps and toppled it. After a failed grasp the
     # palm's full width counts.
-    from pipeline.policies.scripted.grasps import closing_axis, plan_grasp
+    from pipeline.policies.scripted.grasps import plan_grasp
+    from pipeline.policies.scripted.hand import closing_axis
 
     task, env = bowl_on_plate
     start(env)
@@ -225,7 +228,8 @@ def test_a_goal_object_before_a_part_open_drawer_is_set_aside_without_lifting_ov
     from pipeline.config import ScriptedNoise
     from pipeline.policies.scripted.noise import Noise, episode_rng
     from pipeline.policies.scripted.recovery.put_aside import HAND_REACH_M, goal_points
-    from pipeline.policies.scripted.skills import Ctx, sweep_clearance
+    from pipeline.policies.scripted.motion import Ctx
+    from pipeline.policies.scripted.placement import sweep_clearance
 
     task = tasks(["libero_90"])[5]  # put the chocolate pudding in the top drawer of the cabinet and close it
     with build_env(task) as env:
@@ -236,7 +240,7 @@ def test_a_goal_object_before_a_part_open_drawer_is_set_aside_without_lifting_ov
         s = Scene(env)
         sweep = checks.drawer_sweep(s, joint)
         fr = env.joint_frame(joint)
-        out = fr["axis"] * np.sign(fr["range"][np.argmax(np.abs(fr["range"]))])  # the opening direction
+        out = fr.axis * np.sign(fr.range[np.argmax(np.abs(fr.range))])  # the opening direction
         k = int(np.argmax(np.abs(out[:2])))
         front = sweep[1, k] if out[k] > 0 else sweep[0, k]
         p = env.object_pose(obj)[0].copy()
@@ -260,7 +264,7 @@ def test_a_tall_obstruction_is_set_aside_standing(bowl_on_plate):
     from pipeline.config import ScriptedNoise
     from pipeline.policies.scripted.noise import Noise
     from pipeline.policies.scripted.recovery.put_aside import put_aside
-    from pipeline.policies.scripted.skills import Ctx
+    from pipeline.policies.scripted.motion import Ctx
 
     task, env = bowl_on_plate
     start(env)

@@ -14,11 +14,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from pipeline.policies.scripted.goal import Predicate
+from pipeline.policies.scripted.motion import Ctx, Plan, free_hand, travel
+from pipeline.policies.scripted.notes import Outcome
 from pipeline.policies.scripted.primitives import Grip
-from pipeline.policies.scripted.skills import Ctx, Plan, free_hand, travel
 from pipeline.sim import SimEnv
+from pipeline.sim.facts import JointKind
 
-FINGER_REACH = 0.047  # fingertip centre from the grip site along the closing axis, open
 FINGER_HALF = 0.01  # half thickness of a closed finger pair along the closing axis
 LOW_DRAWER_M = 0.08  # a handle lower than this over the table: push with a pitched fist
 PUSH_PITCH = 0.9  # radians from straight down, towards the push
@@ -27,11 +29,11 @@ PUSH_PITCH = 0.9  # radians from straight down, towards the push
 def part_joint(env: SimEnv, name: str) -> str | None:
     if env.is_region(name):
         r = env.region(name)
-        if r["joints"]:
-            return r["joints"][0]
-        name = r["parent"] or ""
+        if r.joints:
+            return r.joints[0]
+        name = r.parent or ""
     if name in env.fixture_names or name in env.object_names:
-        joints = [j for j in env.fixture_joints(name) if env.joint_frame(j)["kind"] in ("slide", "hinge")]
+        joints = [j for j in env.fixture_joints(name) if env.joint_frame(j).kind in (JointKind.SLIDE, JointKind.HINGE)]
         if len(joints) == 1:
             return joints[0]
     return None
@@ -42,10 +44,10 @@ def openable(env: SimEnv, region: str) -> str | None:
     if not env.is_region(region):
         return None
     r = env.region(region)
-    if r["joints"]:
+    if r.joints:
         return region
-    parent = r["parent"]
-    if parent and part_joint(env, parent) and env.joint_frame(part_joint(env, parent))["kind"] == "hinge":
+    parent = r.parent
+    if parent and part_joint(env, parent) and env.joint_frame(part_joint(env, parent)).kind == JointKind.HINGE:
         return parent
     return None
 
@@ -56,16 +58,16 @@ def close_lower_first(env: SimEnv, steps: list[tuple[str, ...]]) -> list[tuple[s
     shut itself)."""
     def slide_floor(name: str) -> float | None:
         joint = part_joint(env, name)
-        if joint is None or env.joint_frame(joint)["kind"] != "slide":
+        if joint is None or env.joint_frame(joint).kind != JointKind.SLIDE:
             return None
         return float(env.joint_part_boxes(joint)[:, 0, 2].min())
 
     out = list(steps)
     for c in steps:
-        zc = slide_floor(c[1]) if c[0] == "close" else None
+        zc = slide_floor(c[1]) if c[0] == Predicate.CLOSE else None
         if zc is None:
             continue
-        above = [i for i, o in enumerate(out) if o[0] == "open" and (zo := slide_floor(o[1])) is not None and zo > zc]
+        above = [i for i, o in enumerate(out) if o[0] == Predicate.OPEN and (zo := slide_floor(o[1])) is not None and zo > zc]
         if above and above[0] < out.index(c):
             out.remove(c)
             out.insert(above[0], c)
@@ -100,13 +102,13 @@ def _operate_part(ctx: Ctx, conjunct: tuple[str, ...], opening: bool) -> Plan:
         if state.is_open() if opening else state.is_close():
             return
         ctx.begin("open" if opening else "close", conjunct, conjunct[1])
-        if env.joint_frame(joint)["kind"] == "slide":
-            yield from _pull_drawer(ctx, joint) if opening else _push_drawer(ctx, joint)
+        if env.joint_frame(joint).kind == JointKind.SLIDE:
+            yield from pull_drawer(ctx, joint) if opening else _push_drawer(ctx, joint)
         else:
             yield from _swing_door(ctx, joint, opening=opening)
         if ctx.truth is not None:
             done = state.is_open() if opening else state.is_close()
-            ctx.end("achieved" if done else "half_open", f"{joint} at {env.joint_frame(joint)['qpos']:.3f}")
+            ctx.end(Outcome.ACHIEVED if done else Outcome.HALF_OPEN, f"{joint} at {env.joint_frame(joint).qpos:.3f}")
 
 
 def open_part(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:
@@ -117,12 +119,12 @@ def close_part(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:
     return _operate_part(ctx, conjunct, opening=False)
 
 
-def _pull_drawer(ctx: Ctx, joint: str) -> Plan:
+def pull_drawer(ctx: Ctx, joint: str) -> Plan:
     """Tilt the hand to point at the drawer, fingers above and below the handle bar, grip, pull."""
     s, env = ctx.scene, ctx.scene.env
     fr = env.joint_frame(joint)
-    sign = open_sign(fr["range"])
-    pull = fr["axis"] * sign
+    sign = open_sign(fr.range)
+    pull = fr.axis * sign
     pull = pull / np.linalg.norm(pull)
     box, k, d = handle_box(env, joint, pull)
     front = box[1, k] if d > 0 else box[0, k]
@@ -148,8 +150,8 @@ def _pull_drawer(ctx: Ctx, joint: str) -> Plan:
     t = ctx.noise.timing()
     ctx.note(grasp_timing=t)
     yield Grip(1.0, ctx.close_steps + max(t, 0), label="grip_handle")
-    u = sign * env.joint_frame(joint)["qpos"]  # how open it is now
-    full = float(np.max(np.abs(fr["range"])))
+    u = sign * env.joint_frame(joint).qpos  # how open it is now
+    full = float(np.max(np.abs(fr.range)))
     target = s.eef() + pull * (full - u + 0.01)
     yield ctx.move(target, gripper=1.0, speed=0.5, yaw=yaw, approach=approach, tol=0.01, max_steps=60, label="pull")
     yield Grip(-1.0, ctx.open_steps, label="let_go")
@@ -171,8 +173,8 @@ def front_panel(env: SimEnv, joint: str, k: int, d: float) -> np.ndarray:
 def _push_drawer(ctx: Ctx, joint: str) -> Plan:
     s, env = ctx.scene, ctx.scene.env
     fr = env.joint_frame(joint)
-    sign = open_sign(fr["range"])
-    pull = fr["axis"] * sign
+    sign = open_sign(fr.range)
+    pull = fr.axis * sign
     box, k, d = handle_box(env, joint, pull)
     if (box[0, 2] + box[1, 2]) / 2 < s.table_height() + LOW_DRAWER_M:
         yield from _push_low_drawer(ctx, joint)
@@ -189,7 +191,7 @@ def _push_drawer(ctx: Ctx, joint: str) -> Plan:
     hover = pos + [0, 0, 0.08]
     yield from travel(ctx, hover, yaw, 1.0, s.path_clearance(s.eef(), hover, 0.06, set()) + 0.07)
     yield ctx.move(pos, gripper=1.0, speed=0.6, yaw=yaw, tol=0.01, max_steps=50, label="face_drawer")
-    u = sign * env.joint_frame(joint)["qpos"]
+    u = sign * env.joint_frame(joint).qpos
     target = pos.copy()
     target[k] = front + d * FINGER_HALF - d * (u + 0.025)
     yield ctx.move(target, gripper=1.0, speed=0.6, yaw=yaw, tol=0.008, max_steps=60, label="push")
@@ -205,8 +207,8 @@ def _push_low_drawer(ctx: Ctx, joint: str) -> Plan:
     wrist trails behind, the forearm stays off the cabinet), and pushes past closed."""
     s, env = ctx.scene, ctx.scene.env
     fr = env.joint_frame(joint)
-    sign = open_sign(fr["range"])
-    pull = fr["axis"] * sign
+    sign = open_sign(fr.range)
+    pull = fr.axis * sign
     box, k, d = handle_box(env, joint, pull)
     panel = front_panel(env, joint, k, d)
     face = panel[1, k] if d > 0 else panel[0, k]
@@ -228,7 +230,7 @@ def _push_low_drawer(ctx: Ctx, joint: str) -> Plan:
     # a diagonal descent catches the fingertips on the panel's top edge
     yield ctx.move(hover, gripper=1.0, yaw=yaw, approach=point, tol=0.006, rot_tol=0.15, max_steps=40, label="pitch")
     yield ctx.move(pos, gripper=1.0, speed=0.6, yaw=yaw, approach=point, tol=0.01, max_steps=50, label="face_drawer")
-    u = sign * env.joint_frame(joint)["qpos"]
+    u = sign * env.joint_frame(joint).qpos
     target = pos.copy()
     target[k] = face + d * FINGER_HALF - d * (u + 0.03)  # past closed: LIBERO's `close` is qpos beyond 0
     yield ctx.move(target, gripper=1.0, speed=0.6, yaw=yaw, approach=point, tol=0.008, max_steps=60, label="push")
@@ -242,12 +244,12 @@ def _swing_door(ctx: Ctx, joint: str, opening: bool) -> Plan:
     """Sweep a hinged panel with a closed hand pressing on its face, in small arcs."""
     s, env = ctx.scene, ctx.scene.env
     fr = env.joint_frame(joint)
-    sign = open_sign(fr["range"])
-    goal_q = fr["range"][0] if sign < 0 else fr["range"][1]
+    sign = open_sign(fr.range)
+    goal_q = fr.range[0] if sign < 0 else fr.range[1]
     goal_q = 0.8 * goal_q if opening else -sign * 0.05
-    q = fr["qpos"]
+    q = fr.qpos
     boxes = env.joint_part_boxes(joint)
-    anchor, axis = fr["anchor"], fr["axis"]
+    anchor, axis = fr.anchor, fr.axis
     centres = (boxes[:, 0] + boxes[:, 1]) / 2
     radial = centres[:, :2] - anchor[:2]
     far = int(np.argmax(np.linalg.norm(radial, axis=1)))

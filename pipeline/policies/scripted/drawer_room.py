@@ -14,8 +14,11 @@ from __future__ import annotations
 import numpy as np
 
 from pipeline.policies.scripted.articulated import FINGER_HALF, front_panel, handle_box, open_sign, open_part, part_joint
+from pipeline.policies.scripted.motion import Ctx, Plan, travel
+from pipeline.policies.scripted.notes import Outcome
+from pipeline.policies.scripted.placement import place_room
 from pipeline.policies.scripted.primitives import Grip
-from pipeline.policies.scripted.skills import Ctx, Plan, place_room, travel
+from pipeline.sim.facts import JointKind
 
 END_M = 0.005  # a slide this close to the end of its range counts as fully out
 PART_WAY_M = 0.1  # out this far (most of the way: a pull stopped short), a fist fits behind the front wall
@@ -25,22 +28,22 @@ def cramped(ctx: Ctx, region: str, obj: str) -> bool:
     """An open drawer, short of the end of its slide, with no clear spot for `obj`."""
     env = ctx.scene.env
     joint = part_joint(env, region) if env.is_region(region) else None
-    if joint is None or env.joint_frame(joint)["kind"] != "slide" or not env.object_state(region).is_open():
+    if joint is None or env.joint_frame(joint).kind != JointKind.SLIDE or not env.object_state(region).is_open():
         return False
     fr = env.joint_frame(joint)
-    if open_sign(fr["range"]) * fr["qpos"] >= float(np.max(np.abs(fr["range"]))) - END_M:
+    if open_sign(fr.range) * fr.qpos >= float(np.max(np.abs(fr.range))) - END_M:
         return False
-    return not place_room(ctx, obj, region)
+    return not place_room(ctx.scene, obj, region)
 
 
 def part_way_out(env, region: str) -> bool:
     """A drawer pulled out far enough for a fist behind its front wall, but not yet open by
     LIBERO's predicate (a pull stopped short: the tilted hand met something behind it)."""
     joint = part_joint(env, region) if env.is_region(region) else None
-    if joint is None or env.joint_frame(joint)["kind"] != "slide" or env.object_state(region).is_open():
+    if joint is None or env.joint_frame(joint).kind != JointKind.SLIDE or env.object_state(region).is_open():
         return False
     fr = env.joint_frame(joint)
-    return open_sign(fr["range"]) * fr["qpos"] >= PART_WAY_M
+    return open_sign(fr.range) * fr.qpos >= PART_WAY_M
 
 
 def finish_opening(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:
@@ -51,7 +54,7 @@ def finish_opening(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:
     yield from drag_out(ctx, joint)
     if ctx.truth is not None:
         done = env.object_state(conjunct[1]).is_open()
-        ctx.end("achieved" if done else "half_open", f"{joint} at {env.joint_frame(joint)['qpos']:.3f}")
+        ctx.end(Outcome.ACHIEVED if done else Outcome.HALF_OPEN, f"{joint} at {env.joint_frame(joint).qpos:.3f}")
 
 
 def make_room(ctx: Ctx, conjunct: tuple[str, ...], obj: str) -> Plan:
@@ -64,15 +67,15 @@ def make_room(ctx: Ctx, conjunct: tuple[str, ...], obj: str) -> Plan:
         joint = part_joint(env, conjunct[1])
         yield from drag_out(ctx, joint)
         if ctx.truth is not None:
-            ctx.end("achieved" if not cramped(ctx, conjunct[1], obj) else "half_open",
-                    f"{joint} at {env.joint_frame(joint)['qpos']:.3f}")
+            ctx.end(Outcome.ACHIEVED if not cramped(ctx, conjunct[1], obj) else Outcome.HALF_OPEN,
+                    f"{joint} at {env.joint_frame(joint).qpos:.3f}")
 
 
 def drag_out(ctx: Ctx, joint: str) -> Plan:
     s, env = ctx.scene, ctx.scene.env
     fr = env.joint_frame(joint)
-    sign = open_sign(fr["range"])
-    pull = fr["axis"] * sign
+    sign = open_sign(fr.range)
+    pull = fr.axis * sign
     pull = pull / np.linalg.norm(pull)
     box, k, d = handle_box(env, joint, pull)
     panel = front_panel(env, joint, k, d)
@@ -94,8 +97,8 @@ def drag_out(ctx: Ctx, joint: str) -> Plan:
     hover = pos + [0, 0, 0.1]
     yield from travel(ctx, hover, yaw, 1.0, s.path_clearance(s.eef(), hover, 0.06, set()) + 0.07)
     yield ctx.move(pos, gripper=1.0, speed=0.6, yaw=yaw, tol=0.01, max_steps=50, label="into_drawer")
-    u = sign * env.joint_frame(joint)["qpos"]
-    full = float(np.max(np.abs(fr["range"])))
+    u = sign * env.joint_frame(joint).qpos
+    full = float(np.max(np.abs(fr.range)))
     yield ctx.move(s.eef() + pull * (full - u + 0.01), gripper=1.0, speed=0.5, yaw=yaw, tol=0.006, max_steps=30,
                    label="drag_out")
     yield ctx.move(s.eef() + [0, 0, 0.1], gripper=1.0, yaw=yaw, tol=0.02, max_steps=30, label="retreat")

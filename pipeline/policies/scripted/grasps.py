@@ -10,10 +10,11 @@ landing spots are probed with vertical rays through the live scene.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Callable
 
 import numpy as np
 
+from pipeline.policies.scripted.hand import FINGER_REACH, Grasp, closing_axis, closing_yaw
 from pipeline.policies.scripted.pan_handle import pan_handle_grasp
 from pipeline.policies.scripted.reach import overreach
 from pipeline.policies.scripted.scene import TABLE_MARGIN, Scene
@@ -21,7 +22,6 @@ from pipeline.policies.scripted.scene import TABLE_MARGIN, Scene
 MAX_SPAN = 0.068  # widest object (along the closing axis) grasped whole
 RIM_INSET = 0.012  # grasp point inside the outer rim edge
 RIM_DEPTH = 0.02  # grip site below the rim top
-FINGER_REACH = 0.047  # open fingertip centre from the grip site
 LONG_M = 0.12  # horizontal length beyond which a whole-object grasp goes to the centre of mass
 TALL_M = 0.11  # objects taller than this may be carried by a handle
 HANDLE_THIN_M, HANDLE_OUT_M = 0.016, 0.055  # a handle part: thinner than this, this far out
@@ -34,13 +34,6 @@ SLAB_THIN_M, SLAB_TALL_M, SLAB_RATIO = 0.04, 0.09, 2.5
 SLAB_GRIP_BELOW_TOP = 0.028
 
 
-@dataclass(frozen=True)
-class Grasp:
-    pos: np.ndarray
-    yaw: float  # 0: fingers close along world y
-    rim: bool
-
-
 def is_upright_slab(scene: Scene, obj: str) -> bool:
     """A thin, tall, long object standing on its edge (a book)."""
     xy = scene.env.object_corners(obj)[:, :2]
@@ -49,17 +42,7 @@ def is_upright_slab(scene: Scene, obj: str) -> bool:
     return thin < SLAB_THIN_M and long > SLAB_RATIO * thin and scene.box(obj).size[2] > SLAB_TALL_M
 
 
-def closing_axis(yaw: float) -> np.ndarray:
-    return np.array([-np.sin(yaw), np.cos(yaw), 0.0])
-
-
-def closing_yaw(direction: np.ndarray) -> float:
-    """A top-down hand yaw whose `closing_axis` is the horizontal `direction` (in (-pi, pi];
-    yaw + pi closes along it too)."""
-    return float(np.arctan2(-direction[0], direction[1]))
-
-
-def _blocked(scene: Scene, pos: np.ndarray, yaw: float, top: float, skip_tips: bool = False) -> float:
+def blocked_depth(scene: Scene, pos: np.ndarray, yaw: float, top: float, skip_tips: bool = False) -> float:
     """How far (m) anything sticks up into the hand's way when the grip site is at `pos`:
     under both fingertips (unless `skip_tips`) and under the palm's ends (about 6 cm above
     the tips)."""
@@ -121,17 +104,14 @@ def handle_grasp(scene: Scene, obj: str) -> Grasp | None:
     return Grasp(pos=pos, yaw=yaw, rim=False)
 
 
-def plan_grasp(scene: Scene, obj: str, dest: np.ndarray | None = None, choice: int = 0) -> Grasp:
-    """`dest` (x, y, support top) is where the object's body goes next: the hand must fit
-    there too, so rim sides that would put the hand into a wall at the target lose.
-    `choice` k > 0 takes the k-th best candidate instead of the best (a retry after a
-    failed grasp tries another yaw or rim side, not the same one again)."""
+def whole_grasp(scene: Scene, obj: str, dest: np.ndarray | None, choice: int) -> Grasp | None:
+    """Around the object's middle, across its narrowest closing direction that fits between
+    the fingers (little wrist turn preferred); None when no direction fits."""
     box = scene.box(obj)
     corners = scene.env.object_corners(obj)
     centre = box.centre
     h = box.size[2]
     floor = box.lo[2] + TABLE_MARGIN
-    # whole-object grasp: narrowest closing direction that fits
     widths = [(float(np.ptp(corners[:, :2] @ closing_axis(y)[:2])), y) for y in YAWS]
     fitting = []
     slab = is_upright_slab(scene, obj)
@@ -153,17 +133,31 @@ def plan_grasp(scene: Scene, obj: str, dest: np.ndarray | None = None, choice: i
             pos[:2] += along * ((com - pos[:2]) @ along)
         # a neighbour under the palm's ends (it reaches ~10 cm along the closing axis)
         # would stop the descent: such yaws lose
-        block = _blocked(scene, pos, yaw, box.hi[2], skip_tips=True)
+        block = blocked_depth(scene, pos, yaw, box.hi[2], skip_tips=True)
         fitting.append((w + 0.02 * abs(yaw) + 10 * block, len(fitting), Grasp(pos=pos, yaw=float(yaw), rim=False)))
     if fitting:
         return sorted(fitting, key=lambda f: f[:2])[choice % len(fitting)][2]
+    return None
+
+
+def tall_handle_grasp(scene: Scene, obj: str, dest: np.ndarray | None, choice: int) -> Grasp | None:
+    """A moka pot's handle (`handle_grasp`) on even choices; its rim on odd ones (a retry)."""
     handle = handle_grasp(scene, obj)
-    if handle is not None and choice % 2 == 0:
-        return handle
-    pan = pan_handle_grasp(scene, obj)  # a frying pan: always by its handle
-    if pan is not None:
-        return pan
-    # rim grasp: radial direction whose outer finger lands clear
+    return handle if handle is not None and choice % 2 == 0 else None
+
+
+def pan_grasp(scene: Scene, obj: str, dest: np.ndarray | None, choice: int) -> Grasp | None:
+    """A frying pan: always by its handle (pan_handle.py)."""
+    return pan_handle_grasp(scene, obj)
+
+
+def rim_grasp(scene: Scene, obj: str, dest: np.ndarray | None, choice: int) -> Grasp:
+    """By the rim wall: the radial direction whose outer finger lands clear (and, with
+    `dest`, whose hand fits at the destination too)."""
+    box = scene.box(obj)
+    corners = scene.env.object_corners(obj)
+    centre = box.centre
+    floor = box.lo[2] + TABLE_MARGIN
     ranked = []
     for theta in np.linspace(-np.pi, np.pi, 16, endpoint=False):
         u = np.array([np.cos(theta), np.sin(theta), 0.0])
@@ -171,15 +165,32 @@ def plan_grasp(scene: Scene, obj: str, dest: np.ndarray | None = None, choice: i
         p = centre + u * (reach - RIM_INSET)
         p[2] = max(box.hi[2] - RIM_DEPTH, floor)
         yaw = (theta - np.pi / 2 + np.pi / 2) % np.pi - np.pi / 2
-        block = _blocked(scene, p, yaw, box.hi[2])
+        block = blocked_depth(scene, p, yaw, box.hi[2])
         if dest is not None:
             body = scene.env.object_pose(obj)[0]
             there = p - body
             there[:2] += dest[:2]
             there[2] = p[2] - box.lo[2] + dest[2] + 0.015
-            block += _blocked(scene, there, yaw, there[2])
+            block += blocked_depth(scene, there, yaw, there[2])
         # at the edge of the workspace the near rim keeps the elbow bent (see reach.py)
         score = block * 10 + 0.01 * abs(yaw) + 10 * overreach(scene.env, p)
         ranked.append((score, len(ranked), Grasp(pos=p, yaw=float(yaw), rim=True)))
     ranked.sort(key=lambda r: r[:2])
     return ranked[choice % len(ranked)][2]
+
+
+# the grasp strategies, asked in order: the first that gives a grasp is taken (the last always does)
+GRASPS: tuple[Callable[[Scene, str, np.ndarray | None, int], Grasp | None], ...] = (
+    whole_grasp, tall_handle_grasp, pan_grasp, rim_grasp)
+
+
+def plan_grasp(scene: Scene, obj: str, dest: np.ndarray | None = None, choice: int = 0) -> Grasp:
+    """`dest` (x, y, support top) is where the object's body goes next: the hand must fit
+    there too, so rim sides that would put the hand into a wall at the target lose.
+    `choice` k > 0 takes the k-th best candidate instead of the best (a retry after a
+    failed grasp tries another yaw or rim side, not the same one again)."""
+    for strategy in GRASPS:
+        g = strategy(scene, obj, dest, choice)
+        if g is not None:
+            return g
+    raise AssertionError("rim_grasp always answers")

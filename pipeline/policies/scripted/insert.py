@@ -22,8 +22,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from pipeline.policies.scripted import articulated
+from pipeline.policies.scripted.goal import Predicate
+from pipeline.policies.scripted.motion import Ctx, Plan, free_hand, grasp, place_at, travel
+from pipeline.policies.scripted.notes import Halt, Note, Outcome
 from pipeline.policies.scripted.primitives import Grip
-from pipeline.policies.scripted.skills import Ctx, Plan, free_hand, grasp, place_at, travel
+from pipeline.policies.scripted.scene import robot_base
+from pipeline.sim.facts import JointKind
 
 HANDLE_OUT_M = 0.06  # boxes of a mug this far (xy) from its centre of mass form the handle
 FLOOR_MARGIN = 0.025  # object's bottom above the container floor while moving in
@@ -53,7 +57,7 @@ def _door(env, region: str) -> str | None:
     if owner is None or env.is_region(owner):
         return None
     joint = articulated.part_joint(env, owner)
-    return joint if joint is not None and env.joint_frame(joint)["kind"] == "hinge" else None
+    return joint if joint is not None and env.joint_frame(joint).kind == JointKind.HINGE else None
 
 
 def opening(env, region: str) -> Opening | None:
@@ -66,17 +70,17 @@ def opening(env, region: str) -> Opening | None:
     fr = env.joint_frame(joint)
     # the door's closed pose: its boxes' centre turned back about the hinge by -qpos
     door = env.joint_part_boxes(joint)
-    c = (door[:, 0] + door[:, 1]).mean(axis=0)[:2] / 2 - fr["anchor"][:2]
-    a = -fr["qpos"] * float(np.sign(fr["axis"][2]))
-    closed = fr["anchor"][:2] + [c[0] * np.cos(a) - c[1] * np.sin(a), c[0] * np.sin(a) + c[1] * np.cos(a)]
-    d = r["pos"][:2] - closed
+    c = (door[:, 0] + door[:, 1]).mean(axis=0)[:2] / 2 - fr.anchor[:2]
+    a = -fr.qpos * float(np.sign(fr.axis[2]))
+    closed = fr.anchor[:2] + [c[0] * np.cos(a) - c[1] * np.sin(a), c[0] * np.sin(a) + c[1] * np.cos(a)]
+    d = r.pos[:2] - closed
     k = int(np.argmax(np.abs(d)))
     inward = np.zeros(3)
     inward[k] = np.sign(d[k])
     door_ids = {tuple(np.round(b.ravel(), 6)) for b in door}
-    body = [b for b in env.object_boxes(r["parent"]) if tuple(np.round(b.ravel(), 6)) not in door_ids]
+    body = [b for b in env.object_boxes(r.parent) if tuple(np.round(b.ravel(), 6)) not in door_ids]
     across = 1 - k
-    at = r["pos"]
+    at = r.pos
     inside = [b for b in body if b[0, across] <= at[across] <= b[1, across] and b[0, k] <= at[k] <= b[1, k]]
     floor = max((b[1, 2] for b in inside if b[1, 2] <= at[2]), default=None)
     ceiling = min((b[0, 2] for b in inside if b[0, 2] >= at[2]), default=None)
@@ -105,7 +109,7 @@ def opening(env, region: str) -> Opening | None:
 
 def roofed(env, conjunct: tuple[str, ...]) -> bool:
     """An `in` conjunct whose region can only be reached through a door opening."""
-    return conjunct[0] == "in" and env.is_region(conjunct[2]) and opening(env, conjunct[2]) is not None
+    return conjunct[0] == Predicate.IN and env.is_region(conjunct[2]) and opening(env, conjunct[2]) is not None
 
 
 @dataclass(frozen=True)
@@ -162,9 +166,7 @@ def _in_zone(b: np.ndarray, grip: np.ndarray, a: np.ndarray) -> bool:
 
 def _reachable(s, grip: np.ndarray, a: np.ndarray) -> bool:
     """The wrist (~20 cm behind a level hand) within the arm's reach of its shoulder."""
-    from pipeline.policies.scripted.recovery import checks
-
-    shoulder = checks.robot_base(s) + [0.0, 0.0, SHOULDER_Z]
+    shoulder = robot_base(s) + [0.0, 0.0, SHOULDER_Z]
     return float(np.linalg.norm(grip - a * WRIST_M - shoulder)) <= REACH_M
 
 
@@ -201,10 +203,8 @@ def _turned(h: HandleGrasp, body: np.ndarray, a: np.ndarray) -> tuple[float, np.
 def staging_spot(s, obj: str, grip_rel: np.ndarray, a: np.ndarray, toward: np.ndarray) -> np.ndarray | None:
     """The table spot (body xy) from which the level hand can grip the handle, nearest to
     the object and to `toward` (where it goes next) together."""
-    from pipeline.policies.scripted.recovery import checks
-
     body = s.env.object_pose(obj)[0]
-    base = checks.robot_base(s)[:2]
+    base = robot_base(s)[:2]
     best = None
     for dx in np.arange(0.3, 0.75, 0.025):
         for dy in np.arange(-0.35, 0.351, 0.025):
@@ -227,9 +227,9 @@ def _approach(env, region: str, op: Opening) -> np.ndarray:
     """The hand's pointing direction: into the opening, turned a little toward the door's
     hinge. A level hand puts the arm's wrist link ~18 cm to the robot's side of the hand,
     where the open door stands; turning shifts the wrist away from it."""
-    anchor = env.joint_frame(_door(env, region))["anchor"]
+    anchor = env.joint_frame(_door(env, region)).anchor
     across = np.array([-op.inward[1], op.inward[0], 0.0])
-    side = float(np.sign((anchor - env.region(region)["pos"]) @ across))
+    side = float(np.sign((anchor - env.region(region).pos) @ across))
     a = op.inward * np.cos(HINGE_TURN) + across * side * np.sin(HINGE_TURN)
     return a / np.linalg.norm(a)
 
@@ -255,13 +255,13 @@ def insert(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:
         # handle not facing the hand, out of reach for a level hand, or its palm and wrist
         # would hit a neighbour: first set the object down where they fit, turned so the
         # handle faces the hand (a top-down grasp; the carry turns the hand's yaw)
-        spot = staging_spot(s, obj, grip_rel, a, env.region(region)["pos"])
+        spot = staging_spot(s, obj, grip_rel, a, env.region(region).pos)
         if spot is None:
-            ctx.events.append(f"no_staging_spot:{obj}")
+            ctx.events.append(Note(Halt.NO_STAGING_SPOT, obj))
             return
         yield from grasp(ctx, obj, None)
         if s.holding_any() != obj:
-            ctx.events.append(f"missed_grasp:{obj}")
+            ctx.events.append(Note(Outcome.MISSED_GRASP, obj))
             if ctx.truth is not None:
                 ctx.truth.end_hand(obj, False)
             return
@@ -290,7 +290,7 @@ def insert(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:
     k = int(np.argmax(np.abs(op.inward)))
     across = 1 - k
     a_in = op.inward
-    r = env.region(region)["pos"]
+    r = env.region(region).pos
     side_r = float(np.max(np.abs((env.object_corners(obj) - body)[:, across])))
     lo, hi = op.side[0] + side_r + 0.01, op.side[1] - side_r - 0.01
     dest = body.copy()
@@ -307,7 +307,7 @@ def insert(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:
     yield ctx.move(s.eef() + [0, 0, 0.05], gripper=1.0, yaw=yaw, approach=a, speed=0.5, tol=0.015,
                    max_steps=30, label="pick_lift")
     if s.holding_any() != obj:
-        ctx.events.append(f"missed_grasp:{obj}")
+        ctx.events.append(Note(Outcome.MISSED_GRASP, obj))
         if ctx.truth is not None:
             ctx.truth.end_hand(obj, False)
         return
@@ -331,7 +331,7 @@ def insert(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:
     goal[2] = carry_z
     yield ctx.move(goal, gripper=1.0, yaw=yaw, approach=a, speed=0.7, tol=0.01, max_steps=26, label="move_in")
     if s.holding_any() != obj:
-        ctx.events.append(f"dropped:{obj}")
+        ctx.events.append(Note(Outcome.DROPPED, obj))
     # released from FLOOR_MARGIN up: lowering first costs ~16 steps the episode lacks
     yield Grip(-1.0, ctx.open_steps, label="open")
     yield ctx.move(s.eef() - a * (STANDOFF_M + 0.02), yaw=yaw, approach=a, speed=0.5, tol=0.015, max_steps=50,

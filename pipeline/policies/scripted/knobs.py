@@ -10,8 +10,10 @@ from __future__ import annotations
 import numpy as np
 
 from pipeline.policies.scripted.articulated import part_joint
+from pipeline.policies.scripted.goal import Predicate
+from pipeline.policies.scripted.motion import Ctx, Plan, free_hand, travel
+from pipeline.policies.scripted.notes import Outcome
 from pipeline.policies.scripted.primitives import Grip
-from pipeline.policies.scripted.skills import Ctx, Plan, free_hand, travel
 
 
 def bar_yaw(env, joint: str, geom: int) -> float:
@@ -32,14 +34,14 @@ def turn_knob(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:
     joint = part_joint(env, conjunct[1])
     if joint is None:
         raise ValueError(f"{conjunct}: no knob joint in task {env.task.task_id}")
-    on = conjunct[0] == "turnon"
+    on = conjunct[0] == Predicate.TURNON
     for _ in range(ctx.max_attempts):
         if s.satisfied(conjunct):
             return
         fr = env.joint_frame(joint)
-        q, anchor = fr["qpos"], fr["anchor"]
-        spin = float(np.sign(fr["axis"][2]))
-        goal_q = 0.9 if on else fr["range"][0] - 0.05
+        q, anchor = fr.qpos, fr.anchor
+        spin = float(np.sign(fr.axis[2]))
+        goal_q = 0.9 if on else fr.range[0] - 0.05
         boxes = env.joint_part_boxes(joint)
         top = int(np.argmax(boxes[:, 1, 2]))
         grip = boxes[top]
@@ -72,5 +74,5 @@ def turn_knob(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:
         ctx.yaw_hold = yaw + spin * dq
         yield ctx.move(s.eef() + [0, 0, 0.08], yaw=ctx.yaw_hold, tol=0.02, label="retreat")
         if ctx.truth is not None:
-            q_now = env.joint_frame(joint)["qpos"]
-            ctx.end("achieved" if s.satisfied(conjunct) else "not_turned", f"{joint} at {q_now:.3f}")
+            q_now = env.joint_frame(joint).qpos
+            ctx.end(Outcome.ACHIEVED if s.satisfied(conjunct) else Outcome.NOT_TURNED, f"{joint} at {q_now:.3f}")

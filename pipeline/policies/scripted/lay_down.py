@@ -14,8 +14,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from pipeline.policies.scripted.motion import Ctx, Plan, place_at
+from pipeline.policies.scripted.placement import region_box, support_ceiling
 from pipeline.policies.scripted.primitives import Grip
-from pipeline.policies.scripted.skills import Ctx, Plan, place_at, region_box, support_ceiling
 
 WALL_GAP_M = 0.015  # standing footprint this far from the end wall
 TIP_PUSH_M = 0.10  # how far the fist pushes the top
@@ -27,7 +28,7 @@ def too_tall(ctx: Ctx, obj: str, target: str) -> bool:
     """Whether `obj`, standing as it is now on the floor of drawer region `target`, would keep
     its body origin above the region's top."""
     env = ctx.scene.env
-    if not env.is_region(target) or not env.region(target)["joints"]:
+    if not env.is_region(target) or not env.region(target).joints:
         return False
     s = ctx.scene
     centre, half = region_box(env, target)
@@ -41,7 +42,7 @@ def stand_and_tip(ctx: Ctx, obj: str, target: str) -> Plan:
     s = ctx.scene
     env = s.env
     centre, half = region_box(env, target)
-    slide = int(np.argmax(np.abs(env.joint_frame(env.region(target)["joints"][0])["axis"][:2])))
+    slide = int(np.argmax(np.abs(env.joint_frame(env.region(target).joints[0]).axis[:2])))
     k = 1 - slide  # the drawer's long axis, across its slide: the object falls along it
     box = s.box(obj)
     body = env.object_pose(obj)[0]
@@ -66,3 +67,13 @@ def stand_and_tip(ctx: Ctx, obj: str, target: str) -> Plan:
     yield ctx.move(at, gripper=1.0, speed=0.5, yaw=yaw, tol=0.008, max_steps=40, label="to_top")
     yield ctx.move(at + d * TIP_PUSH_M, gripper=1.0, speed=0.4, yaw=yaw, tol=0.01, max_steps=40, label="tip")
     yield ctx.move(s.eef() + [0, 0, 0.08], gripper=1.0, yaw=yaw, tol=0.015, max_steps=30, label="rise")
+
+
+# ---- the placement strategy (see strategies.py) ---------------------------------------------
+def applies(ctx: Ctx, obj: str, target: str) -> bool | None:
+    """It would stand too high in a shallow drawer."""
+    return True if too_tall(ctx, obj, target) else None
+
+
+def plan(ctx: Ctx, obj: str, target: str, _: bool) -> Plan:
+    return stand_and_tip(ctx, obj, target)

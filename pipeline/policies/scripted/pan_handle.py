@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from pipeline.policies.scripted.hand import Grasp
 from pipeline.policies.scripted.scene import Scene
 
 FLAT_M = 0.08  # only objects lower than this (a pot with a handle is grasped otherwise)
@@ -20,9 +21,7 @@ HANDLE_OUT_M = 0.08  # ... and its middle this far from the centre of mass
 ROOT_CLEAR_M = 0.045  # grasp point this far out along the handle from its root
 
 
-def pan_handle_grasp(scene: Scene, obj: str):
-    from pipeline.policies.scripted.grasps import Grasp  # grasps imports this module
-
+def pan_handle_grasp(scene: Scene, obj: str) -> Grasp | None:
     box = scene.box(obj)
     if box.size[2] >= FLAT_M:
         return None

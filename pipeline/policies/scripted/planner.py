@@ -17,23 +17,26 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from pipeline.policies.scripted import articulated, insert, knobs
+from pipeline.policies.scripted.goal import KNOB, PUT, Conjunct, Predicate
+from pipeline.policies.scripted.motion import Ctx, Plan, free_hand
 from pipeline.policies.scripted.primitives import Move
-from pipeline.policies.scripted.skills import Ctx, Plan, free_hand, pick_place
+from pipeline.policies.scripted.skills import pick_place
 
-PREDICATES = ("on", "in", "open", "close", "turnon", "turnoff")
-_ORDER = {"open": 0, "turnon": 1, "turnoff": 1, "on": 2, "in": 2, "close": 3}
+PREDICATES = tuple(Predicate)
+_ORDER = {Predicate.OPEN: 0, Predicate.TURNON: 1, Predicate.TURNOFF: 1, Predicate.ON: 2, Predicate.IN: 2,
+          Predicate.CLOSE: 3}
 ROUNDS = 2
 
 
 def skill_for(conjunct: tuple[str, ...]) -> Callable[[Ctx, tuple[str, ...]], Plan]:
     kind = conjunct[0]
-    if kind in ("on", "in"):
+    if kind in PUT:
         return pick_place
-    if kind == "open":
+    if kind == Predicate.OPEN:
         return articulated.open_part
-    if kind == "close":
+    if kind == Predicate.CLOSE:
         return articulated.close_part
-    if kind in ("turnon", "turnoff"):
+    if kind in KNOB:
         return knobs.turn_knob
     raise ValueError(f"goal predicate {kind!r} of {conjunct} is not one of {PREDICATES}")
 
@@ -47,15 +50,15 @@ def order_goal(
     """
     steps = list(goal)
     for c in goal:
-        thing = opener(c[2]) if c[0] == "in" else None
-        if thing is not None and ("open", thing) not in steps:
-            steps.append(("open", thing))
+        thing = opener(c[2]) if c[0] == Predicate.IN else None
+        if thing is not None and Conjunct(Predicate.OPEN, thing) not in steps:
+            steps.append(Conjunct(Predicate.OPEN, thing))
     # an object that something else goes onto is put in its own place first (stack the bowls
     # in the tray, not carry a stack there: a stack's bottom bowl is hard to grasp)
-    bases = {c[2] for c in steps if c[0] in ("on", "in")}
+    bases = {c[2] for c in steps if c[0] in PUT}
     def rank(ic: tuple[int, tuple[str, ...]]) -> tuple:
         i, c = ic
-        return _ORDER[c[0]], c[0] in ("on", "in") and c[1] not in bases, i
+        return _ORDER[c[0]], c[0] in PUT and c[1] not in bases, i
 
     ranked = sorted(enumerate(steps), key=rank)
     return [c for _, c in ranked]
@@ -63,12 +66,12 @@ def order_goal(
 
 def plan_episode(ctx: Ctx) -> Plan:
     s = ctx.scene
-    goal = [tuple(c) for c in s.env.goal]
+    goal = [Conjunct.of(c) for c in s.env.goal]
     for c in goal:
         skill_for(c)  # fail fast on an unknown predicate
     steps = articulated.close_lower_first(s.env, order_goal(goal, lambda region: articulated.openable(s.env, region)))
     held = s.holding_any()
-    first = [c for c in steps if c[0] in ("on", "in") and c[1] == held and not s.satisfied(c)]
+    first = [c for c in steps if c[0] in PUT and c[1] == held and not s.satisfied(c)]
     if first:
         steps = first + [c for c in steps if c not in first]
     else:
@@ -76,12 +79,12 @@ def plan_episode(ctx: Ctx) -> Plan:
     for _ in range(ROUNDS):
         for c in steps:
             # an implied open (not in the goal) is only needed while the thing is closed
-            if c not in goal and c[0] == "open" and not articulated.is_closed_enough(s.env, c[1]):
+            if c not in goal and c[0] == Predicate.OPEN and not articulated.is_closed_enough(s.env, c[1]):
                 continue
             if c in goal and s.satisfied(c):
                 continue
             # into a container under a roof (a microwave): through its door opening
-            skill = insert.insert_into if c[0] == "in" and insert.can_insert(s, c) else skill_for(c)
+            skill = insert.insert_into if c[0] == Predicate.IN and insert.can_insert(s, c) else skill_for(c)
             yield from skill(ctx, c)
         if s.env.goal_satisfied():
             break

@@ -16,11 +16,11 @@ import numpy as np
 
 from pipeline.config import ScriptedPolicyConfig
 from pipeline.policies.base import Observation
+from pipeline.policies.scripted.motion import Ctx, Plan
 from pipeline.policies.scripted.noise import Noise, episode_rng
 from pipeline.policies.scripted.planner import plan_episode
 from pipeline.policies.scripted.primitives import Primitive, emit
 from pipeline.policies.scripted.scene import Scene
-from pipeline.policies.scripted.skills import Ctx, Plan
 from pipeline.policies.scripted.truth import TruthLog
 from pipeline.sim import TaskSpec
 
@@ -82,7 +82,7 @@ class ScriptedPolicy:
     @property
     def events(self) -> list[str]:
         """What went wrong so far this episode (missed grasps, drops, misplacements)."""
-        return list(self._ctx.events) if self._ctx is not None else []
+        return [str(n) for n in self._ctx.events] if self._ctx is not None else []
 
     def on_step(self, step: int, action: np.ndarray) -> None:
         """Called by the runner's recorder after each executed step: the truth log's trace."""

@@ -16,8 +16,7 @@ EASY_M = 0.80  # grip site this far from the shoulder still leaves the elbow ben
 
 
 def shoulder(env) -> np.ndarray:
-    sim = env.env.sim
-    return np.array(sim.data.body_xpos[sim.model.body_name2id("robot0_base")]) + [0.0, 0.0, SHOULDER_Z]
+    return env.robot_base() + [0.0, 0.0, SHOULDER_Z]
 
 
 def overreach(env, point: np.ndarray) -> float:

@@ -8,11 +8,14 @@ the robot; every call reads the current state, so plans made from it are live.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from pipeline.sim import SimEnv
+from pipeline.sim.facts import Box
+
+if TYPE_CHECKING:
+    from pipeline.sim import SimEnv
 
 TABLE_MARGIN = 0.012  # fingertips sit ~1 cm below the grip site; keep them off the table
 GRIPPER_OPEN = 0.075  # finger-joint spread above which the gripper counts as open
@@ -21,18 +24,7 @@ GRIPPER_OPEN = 0.075  # finger-joint spread above which the gripper counts as op
 CLOSED_EMPTY = 0.003
 
 
-@dataclass(frozen=True)
-class Box:
-    lo: np.ndarray
-    hi: np.ndarray
-
-    @property
-    def centre(self) -> np.ndarray:
-        return (self.lo + self.hi) / 2
-
-    @property
-    def size(self) -> np.ndarray:
-        return self.hi - self.lo
+__all__ = ["Box", "Scene", "robot_base"]
 
 
 class Scene:
@@ -48,7 +40,7 @@ class Scene:
 
     def pos(self, name: str) -> np.ndarray:
         if self.env.is_region(name):
-            return self.env.region(name)["pos"]
+            return self.env.region(name).pos
         return self.env.object_pose(name)[0]
 
     def things(self) -> list[str]:
@@ -124,3 +116,8 @@ class Scene:
 
     def satisfied(self, conjunct: tuple[str, ...]) -> bool:
         return dict(self.env.goal_conjuncts()).get(tuple(conjunct), False)
+
+
+def robot_base(scene: Scene) -> np.ndarray:
+    """World position of the robot's base (both experts measure reach from it)."""
+    return scene.env.robot_base()

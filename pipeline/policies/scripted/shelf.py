@@ -16,9 +16,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.policies.scripted.grasps import SLAB_THIN_M, closing_yaw, is_upright_slab
+from pipeline.policies.scripted.grasps import SLAB_THIN_M, is_upright_slab
+
+from pipeline.policies.scripted.hand import closing_yaw
+from pipeline.policies.scripted.motion import CARRY_CLEARANCE, Ctx, Plan, travel
+from pipeline.policies.scripted.notes import Note, Outcome
+from pipeline.policies.scripted.placement import region_box
 from pipeline.policies.scripted.primitives import Grip
-from pipeline.policies.scripted.skills import CARRY_CLEARANCE, Ctx, Plan, region_box, travel
 from pipeline.policies.scripted.slot import footprint, has_roof
 
 PALM_HALF_M = 0.115  # grip site above the table when the hand points sideways
@@ -32,16 +36,16 @@ def open_side(ctx: Ctx, obj: str, target: str) -> np.ndarray | None:
     for an upright slab; None otherwise."""
     s = ctx.scene
     env = s.env
-    if not env.is_region(target) or env.region(target)["joints"] or not is_upright_slab(s, obj):
+    if not env.is_region(target) or env.region(target).joints or not is_upright_slab(s, obj):
         return None
     centre, half = region_box(env, target)
     if not has_roof(env, target, obj):
         return None  # open sky: not a shelf
     try:
-        walls = env.object_boxes(env.region(target)["parent"])
+        walls = env.object_boxes(env.region(target).parent)
     except KeyError:
         return None
-    base = env.env.sim.data.body_xpos[env.env.sim.model.body_name2id("robot0_base")][:2]
+    base = env.robot_base()[:2]
     open_sides = []
     for d in (np.array([1.0, 0, 0]), np.array([-1.0, 0, 0]), np.array([0, 1.0, 0]), np.array([0, -1.0, 0])):
         face = centre + d * half
@@ -137,7 +141,7 @@ def slide_into_shelf(ctx: Ctx, obj: str, target: str, into: np.ndarray) -> Plan:
     yield ctx.move(ready + [0, 0, 0.03], gripper=1.0, speed=0.4, yaw=yaw, approach=into, tol=0.012, rot_tol=0.08,
                    max_steps=80, label="tilt")
     if not s.holding(obj):  # (the palm may also touch a neighbour: holding_any could name it)
-        ctx.events.append(f"dropped:{obj}")
+        ctx.events.append(Note(Outcome.DROPPED, obj))
         ctx.approach_hold = None
         return
     yield ctx.move(ready, gripper=1.0, speed=0.4, yaw=yaw, approach=into, tol=0.008, max_steps=40, label="level")
@@ -151,3 +155,8 @@ def slide_into_shelf(ctx: Ctx, obj: str, target: str, into: np.ndarray) -> Plan:
     yield ctx.move(s.eef() - into * 0.08, yaw=yaw, approach=into, tol=0.015, max_steps=30, label="back_out")
     ctx.yaw_hold, ctx.approach_hold = 0.0, None
     yield ctx.move(s.eef() + [0, 0, 0.06], tol=0.02, rot_tol=0.15, max_steps=40, label="untilt")
+
+
+# the placement strategy (see strategies.py): a book slid upright into a roofed shelf
+applies = shelf_opening
+plan = slide_into_shelf

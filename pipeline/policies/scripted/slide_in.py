@@ -18,8 +18,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pipeline.policies.scripted.motion import Ctx, Plan, travel
+from pipeline.policies.scripted.notes import Note, Outcome
+from pipeline.policies.scripted.placement import region_box
 from pipeline.policies.scripted.primitives import Grip
-from pipeline.policies.scripted.skills import Ctx, Plan, region_box, travel
 from pipeline.policies.scripted.stack import carried
 
 HAND_ROOM_M = 0.15  # a board lower than this above the floor leaves no room to lower a hand in
@@ -40,9 +42,9 @@ class Compartment:
 
 def compartment(scene, region: str) -> Compartment | None:
     env = scene.env
-    if not env.is_region(region) or env.region(region)["joints"]:
+    if not env.is_region(region) or env.region(region).joints:
         return None
-    parent = env.region(region)["parent"]
+    parent = env.region(region).parent
     if parent not in env.fixture_names:
         return None
     pos, half = region_box(env, region)
@@ -143,7 +145,7 @@ def slide_in(ctx: Ctx, obj: str, comp: Compartment) -> Plan:
     yield ctx.move(hand_for(stage[:2], carry_z), gripper=1.0, speed=0.5, yaw=yaw, tol=0.01, max_steps=60,
                    label="stage")
     if not carried(s, obj):
-        ctx.events.append(f"dropped:{obj}")
+        ctx.events.append(Note(Outcome.DROPPED, obj))
         return
     yield ctx.move(hand_for(final[:2], carry_z), gripper=1.0, speed=0.4, yaw=yaw, tol=0.01, max_steps=90,
                    label="slide_in")
@@ -153,3 +155,15 @@ def slide_in(ctx: Ctx, obj: str, comp: Compartment) -> Plan:
     eef = s.eef()
     yield ctx.move(eef + [out[0] * 0.04, out[1] * 0.04, 0.0], yaw=yaw, tol=0.015, max_steps=30, label="withdraw")
     yield ctx.move(s.eef() + [0, 0, 0.1], yaw=yaw, tol=0.02, label="retreat")
+
+
+# ---- the placement strategy (see strategies.py) ---------------------------------------------
+def applies(ctx: Ctx, obj: str, target: str) -> Compartment | None:
+    """A shelf compartment, the object held by its outer end (a pan's handle): slid in from
+    the open side, not lowered onto the board above."""
+    comp = compartment(ctx.scene, target)
+    return comp if comp is not None and hand_stays_out(ctx, obj, comp) else None
+
+
+def plan(ctx: Ctx, obj: str, target: str, comp: Compartment) -> Plan:
+    return slide_in(ctx, obj, comp)

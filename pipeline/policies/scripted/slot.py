@@ -17,8 +17,10 @@ from __future__ import annotations
 import numpy as np
 
 from pipeline.policies.scripted.grasps import is_upright_slab
+from pipeline.policies.scripted.motion import CARRY_CLEARANCE, Ctx, Plan, travel
+from pipeline.policies.scripted.notes import Note, Outcome
+from pipeline.policies.scripted.placement import region_box
 from pipeline.policies.scripted.primitives import Grip
-from pipeline.policies.scripted.skills import CARRY_CLEARANCE, Ctx, Plan, region_box, travel
 
 FIT_MARGIN = 0.004  # slab edge to compartment wall, each side, at the least
 RELEASE_GAP = 0.008  # slab bottom above the compartment floor when the fingers open
@@ -54,7 +56,7 @@ def slot_alignment(ctx: Ctx, obj: str, target: str) -> float | None:
     does not apply (see the module docstring)."""
     s = ctx.scene
     env = s.env
-    if not env.is_region(target) or env.region(target)["joints"] or not is_upright_slab(s, obj):
+    if not env.is_region(target) or env.region(target).joints or not is_upright_slab(s, obj):
         return None
     if has_roof(env, target, obj):
         return None
@@ -105,7 +107,7 @@ def place_in_slot(ctx: Ctx, obj: str, target: str, angle: float) -> Plan:
     ctx.yaw_hold = yaw
     yield ctx.move(over, gripper=1.0, speed=0.5, yaw=yaw, tol=0.006, rot_tol=0.04, max_steps=60, label="align")
     if s.holding_any() != obj:
-        ctx.events.append(f"dropped:{obj}")
+        ctx.events.append(Note(Outcome.DROPPED, obj))
         if ctx.truth is not None:
             ctx.truth.end_hand(obj, False)
         return
@@ -123,3 +125,8 @@ def place_in_slot(ctx: Ctx, obj: str, target: str, angle: float) -> Plan:
     yield Grip(-1.0, ctx.open_steps + 4 + max(t, 0), label="open")
     yield ctx.move(s.eef() + [0, 0, 0.03], speed=0.3, yaw=yaw, tol=0.01, max_steps=20, label="retreat")
     yield ctx.move(s.eef() + [0, 0, 0.1], yaw=yaw, tol=0.02, label="retreat")
+
+
+# the placement strategy (see strategies.py): a book turned to a narrow compartment, lowered in
+applies = slot_alignment
+plan = place_in_slot

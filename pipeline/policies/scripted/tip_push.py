@@ -14,10 +14,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.policies.scripted.grasps import closing_yaw
+from pipeline.policies.scripted.hand import closing_yaw
+from pipeline.policies.scripted.motion import CARRY_CLEARANCE, Ctx, Plan, travel
+from pipeline.policies.scripted.placement import region_box
 from pipeline.policies.scripted.primitives import Grip
 from pipeline.policies.scripted.scene import TABLE_MARGIN
-from pipeline.policies.scripted.skills import CARRY_CLEARANCE, Ctx, Plan, region_box, travel
+from pipeline.policies.scripted.shelf import open_side
 from pipeline.policies.scripted.slot import footprint
 
 STAND_OUT_M = 0.10  # book's footprint centre this far in front of the opening when stood up
@@ -87,3 +89,9 @@ def tip_and_push(ctx: Ctx, obj: str, target: str, into: np.ndarray) -> Plan:
         yield ctx.move(s.eef() - into * 0.03 + [0, 0, 0.08], yaw=yaw, tol=0.015, max_steps=30, label="rise")
         if s.satisfied(("in", obj, target)):
             return
+
+
+# the placement strategy (see strategies.py): a gap too low for the tilted hand (shelf.py
+# found none high enough): tip the book flat, push it in
+applies = open_side
+plan = tip_and_push

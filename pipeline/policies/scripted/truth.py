@@ -56,6 +56,7 @@ import pyarrow as pa
 from pydantic import BaseModel
 
 from pipeline.arrow import F32, arrow_schema
+from pipeline.policies.scripted.notes import Outcome
 
 KNOCK_M = 0.02  # displacement by contact that counts as knocking an object
 FAR_KNOCK_M = 0.05  # ... for an object the goal does not involve, in an achieved attempt
@@ -64,8 +65,8 @@ TOPPLE_DEG, TILT_START_DEG = 45.0, 10.0  # tipped over counts as knocked; its on
 HELD_ROWS = 3  # states in hand that make a hold (fewer: fingers brushing the object)
 LIFT_HELD_M = 0.02  # lifted this much, one finger's touch is a hold
 DROP_M, FALL_ROWS = 0.03, 8  # fell >= DROP_M within FALL_ROWS steps of leaving the hand: dropped
-OUTCOMES = ("achieved", "missed_grasp", "lost_grasp", "dropped", "misplaced", "knocked", "half_open",
-            "not_turned", "timeout")
+OUTCOMES = tuple(Outcome)  # (StrEnum: each equals the string written)
+PENDING = "pending"  # a pick-and-place attempt not yet judged (see `rows`)
 
 class PhaseMark(BaseModel):
     label: str
@@ -107,7 +108,7 @@ class TruthRow(BaseModel):
     action_noise: F32  # per-step action noise scale
     speed_factor: F32
     subgoal_achieved: bool
-    outcome: str  # one of OUTCOMES
+    outcome: str  # an `Outcome`
     event: str | None  # close | slip | release | knock | undo | let_go | timeout
     event_step: int | None
     event_object: str | None
@@ -138,7 +139,7 @@ class Attempt:
     start: int
     reference_xy: np.ndarray | None = None
     end: int | None = None
-    outcome: str = "timeout"
+    outcome: str = Outcome.TIMEOUT  # (or PENDING)
     event: str | None = None
     event_step: int | None = None
     hand: str | None = None  # the object a pick-and-place attempt judged from the hand trace
@@ -241,14 +242,14 @@ class TruthLog:
         if (a := self._open()) is not None:
             a.phases.append((label, self.step))
 
-    def end(self, outcome: str, detail: str = "") -> None:
+    def end(self, outcome: Outcome, detail: str = "") -> None:
         """Close the current attempt with the skill's verdict (articulated parts, knobs)."""
         if outcome not in OUTCOMES:
             raise ValueError(f"outcome {outcome!r} is not one of {OUTCOMES}")
         if (a := self._open()) is None:
             return
         a.end, a.outcome, a.detail = self.step, outcome, detail
-        if outcome in ("half_open", "not_turned"):
+        if outcome in (Outcome.HALF_OPEN, Outcome.NOT_TURNED):
             steps = [s for lab, s in a.phases if lab in ("let_go", "back_off", "retreat")]
             a.event, a.event_step = "let_go", (min(steps) if steps else a.start)
 
@@ -260,29 +261,29 @@ class TruthLog:
         if (a := self._open()) is None:
             return
         a.end, a.hand = self.step, obj
-        a.outcome = "achieved" if satisfied else "pending"
+        a.outcome = Outcome.ACHIEVED if satisfied else PENDING
 
     def _judge_hand(self, a: Attempt) -> None:
         obj = a.hand
         run = self._held_run(a, obj)
         if run is None:
-            a.outcome, a.event = "missed_grasp", "close"
+            a.outcome, a.event = Outcome.MISSED_GRASP, "close"
             a.event_step = self._first_cmd(a, self._first("descend", a), closing=True)
             return
         s, e = run
         if e is None:  # still in hand when the episode ended: never released
             r = self._first_cmd(a, self._first("lower", a) or s, closing=False)
-            a.outcome, a.event, a.event_step = "misplaced", "release", (a.end if r is None else r)
+            a.outcome, a.event, a.event_step = Outcome.MISPLACED, "release", (a.end if r is None else r)
             return
         if self.cmd[e - 1] > 0:
-            a.outcome, a.event, a.event_step = "lost_grasp", "slip", e
+            a.outcome, a.event, a.event_step = Outcome.LOST_GRASP, "slip", e
             return
         r = e - 1  # the open command that began the run of opening it left the hand in
         while r > s and self.cmd[r - 1] <= 0:
             r -= 1
         z = np.array([p[self.objects.index(obj)][2] for p in self.pos[r:e + FALL_ROWS + 1]])
         fell = float(z[0] - z.min()) if len(z) else 0.0
-        a.outcome = "dropped" if fell >= DROP_M else "misplaced"
+        a.outcome = Outcome.DROPPED if fell >= DROP_M else Outcome.MISPLACED
         a.event, a.event_step = "release", r
         a.detail = f"fell {fell:.3f} m after the release"
 
@@ -375,13 +376,13 @@ class TruthLog:
     def _unfinished(self, a: Attempt, last: int) -> None:
         """An attempt the episode ended inside (or that stopped without a verdict)."""
         if self.scene.satisfied(a.conjunct):
-            a.outcome = "achieved"  # the goal check ended the episode before the skill looked
+            a.outcome = Outcome.ACHIEVED  # the goal check ended the episode before the skill looked
         elif a.skill in ("open", "close", "turn_on", "turn_off") and \
                 any(lab in ("let_go", "back_off", "retreat") for lab, _ in a.phases):
-            a.outcome = "half_open" if a.skill in ("open", "close") else "not_turned"
+            a.outcome = Outcome.HALF_OPEN if a.skill in ("open", "close") else Outcome.NOT_TURNED
             a.event, a.event_step = "let_go", min(s for lab, s in a.phases if lab in ("let_go", "back_off", "retreat"))
         else:
-            a.outcome, a.event, a.event_step = "timeout", "timeout", a.start
+            a.outcome, a.event, a.event_step = Outcome.TIMEOUT, "timeout", a.start
         if a.end is None:
             a.end = last
 
@@ -390,21 +391,21 @@ class TruthLog:
         out = []
         idx = {o: i for i, o in enumerate(self.objects)}
         for a in self.attempts:
-            if a.outcome == "pending":
+            if a.outcome == PENDING:
                 self._judge_hand(a)
-            if a.end is None or a.outcome == "timeout":
+            if a.end is None or a.outcome == Outcome.TIMEOUT:
                 self._unfinished(a, last)
             end = min(a.end, last)
-            achieved = a.outcome == "achieved"
+            achieved = a.outcome == Outcome.ACHIEVED
             kind, step, obj = a.event, a.event_step, (a.target if a.event else None)
             knocks = self._knocks(a, end)
             counted = [k for k in knocks if step is None or k["step"] < step]
             if achieved:  # a subgoal reached, but did it disturb the scene?
                 counted = [k for k in knocks if k.get("undo") or k["moved_m"] >= FAR_KNOCK_M or
                            (k["object"] in self.goal_objects and k["object"] not in (a.target, a.reference))]
-            if counted and a.outcome != "timeout":
+            if counted and a.outcome != Outcome.TIMEOUT:
                 k = min(counted, key=lambda d: d["step"])
-                a.outcome, kind, step, obj = "knocked", "undo" if k.get("undo") else "knock", k["step"], k["object"]
+                a.outcome, kind, step, obj = Outcome.KNOCKED, "undo" if k.get("undo") else "knock", k["step"], k["object"]
             step = None if step is None else int(min(max(step, a.start), last))
             grip_err = rel = None
             if kind == "close" and step is not None and a.target in idx:
@@ -423,7 +424,7 @@ class TruthLog:
                 "grasp_timing_steps": n.get("grasp_timing"), "release_timing_steps": n.get("release_timing"),
                 "place_offset_m": None if n.get("place_offset") is None else [float(v) for v in n["place_offset"]],
                 "action_noise": self.action_noise, "speed_factor": self.speed, "subgoal_achieved": achieved,
-                "outcome": a.outcome, "event": kind, "event_step": step, "event_object": obj,
+                "outcome": str(a.outcome), "event": kind, "event_step": step, "event_object": obj,
                 "grip_error_m": grip_err, "release_dist_m": rel, "knocked": knocks,
                 # the scene once the failure played out: an object let go falls for a while,
                 # also when the expert let go only after the attempt (see _judge_hand)

@@ -11,9 +11,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.policies.scripted.recovery import checks
+from pipeline.policies.scripted.motion import HAND_CLEARANCE, Ctx, Plan
 from pipeline.policies.scripted.primitives import Grip
-from pipeline.policies.scripted.skills import HAND_CLEARANCE, Ctx, Plan
+from pipeline.policies.scripted.recovery import checks
 
 PULL_IN_M = 0.12  # horizontal pull toward the base of a nearly straight arm
 

@@ -5,9 +5,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from pipeline.policies.scripted.goal import PUT
+from pipeline.policies.scripted.grasps import plan_grasp
+from pipeline.policies.scripted.hand import FINGER_REACH, closing_axis
+from pipeline.policies.scripted.placement import sweep_clearance
 from pipeline.policies.scripted.recovery.reasons import GiveUpReason
-from pipeline.policies.scripted.scene import Scene
-from pipeline.policies.scripted.skills import sweep_clearance
+from pipeline.policies.scripted.scene import Scene, robot_base
+from pipeline.sim.facts import JointKind
 
 OFF_TABLE_M = 0.06  # a body this far below the table top has fallen off it
 REACH_M = 0.95  # horizontal reach from the robot base the arm can still grasp at
@@ -28,14 +32,9 @@ COMFORT_XY = np.array([[0.15, -0.45], [0.95, 0.45]])
 LIFT_COST = 1.0  # metres of travel one metre of lift over obstacles is worth, choosing a free spot
 
 
-def robot_base(scene: Scene) -> np.ndarray:
-    sim = scene.env.env.sim
-    return np.array(sim.data.body_xpos[sim.model.body_name2id("robot0_base")])
-
-
 def moved_objects(scene: Scene) -> list[str]:
     """Objects the goal moves (first argument of `on` / `in`)."""
-    return [c[1] for c in scene.env.goal if c[0] in ("on", "in") and c[1] in scene.env.object_names]
+    return [c[1] for c in scene.env.goal if c[0] in PUT and c[1] in scene.env.object_names]
 
 
 def hopeless(scene: Scene, objects: list[str]) -> tuple[GiveUpReason, str] | None:
@@ -61,12 +60,8 @@ def hopeless(scene: Scene, objects: list[str]) -> tuple[GiveUpReason, str] | Non
 def awkward_arm(scene: Scene) -> bool:
     """An arm joint near its limit, the grip site outside the comfortable region, or the
     hand tilted away from pointing down: approaches from here go wrong."""
-    sim = scene.env.env.sim
-    m = sim.model
-    for i in range(1, 8):
-        j = m.joint_name2id(f"robot0_joint{i}")
-        lo, hi = m.jnt_range[j]
-        q = sim.data.qpos[m.jnt_qposadr[j]]
+    qs, limits = scene.env.arm_joints()
+    for q, (lo, hi) in zip(qs, limits):
         if lo < hi and min(q - lo, hi - q) < JOINT_MARGIN:
             return True
     eef, rot = scene.env.eef_pose()
@@ -78,10 +73,8 @@ def awkward_arm(scene: Scene) -> bool:
 
 def _elbow_slack(scene: Scene) -> float:
     """Radians the elbow (joint 4) can still straighten before its limit."""
-    sim = scene.env.env.sim
-    m = sim.model
-    j = m.joint_name2id("robot0_joint4")
-    return float(m.jnt_range[j][1] - sim.data.qpos[m.jnt_qposadr[j]])
+    qs, limits = scene.env.arm_joints()
+    return float(limits[3][1] - qs[3])
 
 
 def held(scene: Scene) -> str | None:
@@ -149,8 +142,6 @@ def grasp_blockers(scene: Scene, obj: str, grasp, keep: set[str], half_width: fl
     `grasp` (the palm reaches ~10 cm either way along the closing axis, ~5 cm above the
     grip site; `half_width` across it, 0: its middle line only): the best grasp of a flat
     box next to a tall carton is such a case."""
-    from pipeline.policies.scripted.grasps import closing_axis
-
     ax = closing_axis(grasp.yaw)
     side = np.array([-ax[1], ax[0], 0.0])
     points = [grasp.pos + sg * ax * r + t * side * half_width
@@ -173,8 +164,6 @@ def tip_blockers(scene: Scene, obj: str, grasp, keep: set[str]) -> list[str]:
     higher than the tips (~1 cm below the grip site). The hand closes on them too
     (measured: a lying bottle grasped beside a bowl came up with the bowl clamped to it; a
     bowl's rim grasp beside the bottle's neck took the bottle along)."""
-    from pipeline.policies.scripted.grasps import FINGER_REACH, closing_axis
-
     ax = closing_axis(grasp.yaw)
     tip_z = grasp.pos[2] - 0.012
     top = max(tip_z, scene.box(obj).hi[2]) + 0.4
@@ -200,8 +189,6 @@ def tip_blockers(scene: Scene, obj: str, grasp, keep: set[str]) -> list[str]:
 def clear_grasp_choice(scene: Scene, obj: str, dest: np.ndarray | None, start: int, tries: int = 6) -> int:
     """The first grasp candidate from `start` on whose fingers touch no other object (see
     `tip_blockers`), or `start` when every one does."""
-    from pipeline.policies.scripted.grasps import plan_grasp
-
     for k in range(start, start + tries):
         if not tip_blockers(scene, obj, plan_grasp(scene, obj, dest, k), set()):
             return k
@@ -212,11 +199,11 @@ def drawer_sweep(scene: Scene, joint: str) -> np.ndarray | None:
     """(2, 3) box the drawer of a slide `joint` covers from now until fully open, or None
     for a hinge."""
     fr = scene.env.joint_frame(joint)
-    if fr["kind"] != "slide":
+    if fr.kind != JointKind.SLIDE:
         return None
-    rng = fr["range"]
+    rng = fr.range
     open_q = rng[0] if abs(rng[0]) > abs(rng[1]) else rng[1]
-    shift = fr["axis"] * (open_q - fr["qpos"])
+    shift = fr.axis * (open_q - fr.qpos)
     boxes = scene.env.joint_part_boxes(joint)
     lo, hi = boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0)
     return np.array([np.minimum(lo, lo + shift), np.maximum(hi, hi + shift)])
@@ -234,18 +221,18 @@ def overhanging_drawer(scene: Scene, obj: str, pad: float = 0.02) -> str | None:
     b = scene.box(obj)
     ob = np.array([b.lo, b.hi])
     for name in scene.env.region_names:
-        joints = scene.env.region(name)["joints"]
-        if not joints or scene.env.joint_frame(joints[0])["kind"] != "slide":
+        joints = scene.env.region(name).joints
+        if not joints or scene.env.joint_frame(joints[0]).kind != JointKind.SLIDE:
             continue
         fr = scene.env.joint_frame(joints[0])
         # closed is q = 0 (LIBERO's drawers slide over [-0.16, 0.01]: the range's end nearest
         # 0 is pushed 1 cm in, and taking it for closed made every shut drawer "open")
-        closed_q = float(np.clip(0.0, *sorted(fr["range"])))
-        if abs(fr["qpos"] - closed_q) < OPEN_MIN_M:
+        closed_q = float(np.clip(0.0, *sorted(fr.range)))
+        if abs(fr.qpos - closed_q) < OPEN_MIN_M:
             continue
         boxes = scene.env.joint_part_boxes(joints[0])
         now = np.array([boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0)])
-        shut = now + fr["axis"] * (closed_q - fr["qpos"])
+        shut = now + fr.axis * (closed_q - fr.qpos)
         if now[0, 2] > b.hi[2] and _overlap(now, ob, pad) and not _overlap(shut, ob, pad):
             return name
     return None
@@ -254,7 +241,7 @@ def overhanging_drawer(scene: Scene, obj: str, pad: float = 0.02) -> str | None:
 def proud_in_drawer(scene: Scene, joint: str, margin: float = 0.01) -> list[str]:
     """Objects standing in the drawer of a slide `joint` whose top rises above its walls (a
     bowl leaning on the front wall): closing the drawer jams them against the cabinet."""
-    if scene.env.joint_frame(joint)["kind"] != "slide":
+    if scene.env.joint_frame(joint).kind != JointKind.SLIDE:
         return []
     boxes = scene.env.joint_part_boxes(joint)
     lo, hi = boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0)

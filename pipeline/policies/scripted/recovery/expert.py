@@ -7,7 +7,9 @@ from __future__ import annotations
 import numpy as np
 
 from pipeline.config import ScriptedPolicyConfig
+from pipeline.policies.scripted.motion import Ctx, Plan
 from pipeline.policies.scripted.noise import episode_rng
+from pipeline.policies.scripted.notes import Halt, Note
 from pipeline.policies.scripted.policy import ScriptedPolicy
 from pipeline.policies.scripted.primitives import Move
 from pipeline.policies.scripted.recovery import checks
@@ -15,7 +17,6 @@ from pipeline.policies.scripted.recovery.planner import recover
 from pipeline.policies.scripted.recovery.reasons import GiveUp, GiveUpReason
 from pipeline.policies.scripted.recovery.variation import RetryNoise, variation_levels
 from pipeline.policies.scripted.scene import Scene
-from pipeline.policies.scripted.skills import Ctx, Plan
 from pipeline.policies.scripted.truth import TruthLog
 from pipeline.sim import TaskSpec
 
@@ -87,7 +88,7 @@ class RecoveryExpert(ScriptedPolicy):
             yield from recover(ctx, lambda: self._now, self.budget_steps)
         except GiveUp as e:
             self.give_up_reason, self.give_up_detail = e.reason, e.detail
-            ctx.events.append(f"give_up:{e.reason}")
+            ctx.events.append(Note(Halt.GIVE_UP, e.reason))
         s = ctx.scene
         while True:  # done or given up: hold still
             yield Move(target=s.eef(), gripper=-1.0 if checks.held(s) is None else 1.0, tol=-1.0,

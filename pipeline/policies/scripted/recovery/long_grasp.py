@@ -12,9 +12,11 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.policies.scripted.grasps import LONG_M, Grasp, _blocked, closing_axis
+from pipeline.policies.scripted.grasps import LONG_M, blocked_depth
+
+from pipeline.policies.scripted.hand import Grasp, closing_axis
+from pipeline.policies.scripted.placement import footprint_widths
 from pipeline.policies.scripted.scene import Scene
-from pipeline.policies.scripted.skills import footprint_widths
 
 BLOCKED_M = 0.01  # the palm's way blocked by more than this: slide the grasp
 SHIFTS = (0.015, 0.03, 0.045)  # along the object's length, either way, nearest first
@@ -31,7 +33,7 @@ def slide_clear(scene: Scene, obj: str, g: Grasp) -> Grasp:
     if float(np.ptp(span)) <= LONG_M:
         return g
     top = scene.box(obj).hi[2]
-    block = _blocked(scene, g.pos, g.yaw, top, skip_tips=True)
+    block = blocked_depth(scene, g.pos, g.yaw, top, skip_tips=True)
     if block <= BLOCKED_M:
         return g
     here = float(g.pos[:2] @ along)
@@ -43,7 +45,7 @@ def slide_clear(scene: Scene, obj: str, g: Grasp) -> Grasp:
                 continue
             pos = g.pos.copy()
             pos[:2] += along * sign * d
-            b = _blocked(scene, pos, g.yaw, top, skip_tips=True)
+            b = blocked_depth(scene, pos, g.yaw, top, skip_tips=True)
             if b < best[0] - 1e-3:
                 best = (b, Grasp(pos=pos, yaw=g.yaw, rim=False))
         if best[0] <= BLOCKED_M:

@@ -17,11 +17,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.policies.scripted.grasps import closing_axis, closing_yaw
+from pipeline.policies.scripted.hand import closing_axis, closing_yaw
+from pipeline.policies.scripted.motion import CARRY_CLEARANCE, HAND_CLEARANCE, Ctx, Plan, travel
+from pipeline.policies.scripted.placement import place_xy, support_ceiling
 from pipeline.policies.scripted.primitives import Grip
 from pipeline.policies.scripted.scene import TABLE_MARGIN, Scene
-from pipeline.policies.scripted.skills import (CARRY_CLEARANCE, HAND_CLEARANCE, Ctx, Plan, place_xy,
-                                               support_ceiling, travel)
 
 LYING_COS = 0.5  # the object's own up axis within 60 deg of horizontal: lying
 BAR_OUT_M = 0.06  # a handle's outer bar stands at least this far off the body's axis
@@ -55,15 +55,12 @@ def _handle_bar(scene: Scene, obj: str):
     env = scene.env
     pos, quat = env.object_pose(obj)
     rot = _rot(quat)
-    m, d = env.env.sim.model._model, env.env.sim.data._data
-    bid = env.env.obj_body_id[obj]
-    geoms = [g for g in range(m.ngeom) if int(m.geom_bodyid[g]) == bid and (m.geom_contype[g] or m.geom_conaffinity[g])]
-    if not geoms:
+    xpos, xmat, aabb = env.body_geom_frames(obj)
+    if not len(xpos):
         return None
     # each collision geom's box centre and half size in the object's frame
-    centres = np.array([rot.T @ (d.geom_xpos[g] + d.geom_xmat[g].reshape(3, 3) @ m.geom_aabb[g, :3] - pos)
-                        for g in geoms])
-    halves = np.array([np.abs(rot.T @ d.geom_xmat[g].reshape(3, 3)) @ m.geom_aabb[g, 3:] for g in geoms])
+    centres = np.array([rot.T @ (xpos[g] + xmat[g] @ aabb[g, :3] - pos) for g in range(len(xpos))])
+    halves = np.array([np.abs(rot.T @ xmat[g]) @ aabb[g, 3:] for g in range(len(xpos))])
     # a cup stands tall in its own frame, its handle on its side (not at an end: a bottle
     # lying along its own x or y, as the ketchup does, has its cap far out)
     lo, hi = float((centres[:, 2] - halves[:, 2]).min()), float((centres[:, 2] + halves[:, 2]).max())
@@ -150,7 +147,7 @@ def place_by_handle(ctx: Ctx, obj: str, target: str) -> Plan:
     hold = eef - body
     bottom = eef[2] - box.lo[2]
     radius = 0.6 * float(min(box.size[0], box.size[1])) / 2
-    dest = place_xy(ctx, obj, target)
+    dest = place_xy(ctx.scene, obj, target)
     foot = dest + (box.centre[:2] - body[:2])
     release_z = s.support_top(foot, radius, {obj}, below=support_ceiling(s.env, target)) + 0.015 + bottom
     carry_z = max(s.path_clearance(box.centre, foot, radius, {obj}) + CARRY_CLEARANCE + bottom, release_z + 0.05)

@@ -5,18 +5,19 @@ part skills with a single attempt; a retry differs by `RetryNoise`'s shift."""
 from __future__ import annotations
 
 from pipeline.policies.scripted import articulated, drawer_room, knobs
-from pipeline.policies.scripted.skills import Ctx, Plan
+from pipeline.policies.scripted.goal import Predicate
+from pipeline.policies.scripted.motion import Ctx, Plan
 
 
 def operate_once(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:
     kind = conjunct[0]
     saved, ctx.max_attempts = ctx.max_attempts, 1
     try:
-        if kind == "open" and drawer_room.part_way_out(ctx.scene.env, conjunct[1]):
+        if kind == Predicate.OPEN and drawer_room.part_way_out(ctx.scene.env, conjunct[1]):
             yield from drawer_room.finish_opening(ctx, conjunct)  # not the tilted pull again
-        elif kind == "open":
+        elif kind == Predicate.OPEN:
             yield from articulated.open_part(ctx, conjunct)
-        elif kind == "close":
+        elif kind == Predicate.CLOSE:
             yield from articulated.close_part(ctx, conjunct)
         else:
             yield from knobs.turn_knob(ctx, conjunct)

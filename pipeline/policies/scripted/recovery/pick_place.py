@@ -10,12 +10,15 @@ calls it again from the live state.
 from __future__ import annotations
 
 from pipeline.policies.scripted.grasps import plan_grasp
+from pipeline.policies.scripted.motion import Ctx, Plan, free_hand, grasp
+from pipeline.policies.scripted.notes import Note, Outcome
+from pipeline.policies.scripted.placement import box_centre_offset, destination
 from pipeline.policies.scripted.recovery import checks
 from pipeline.policies.scripted.recovery.long_grasp import lying_long, slide_clear
 from pipeline.policies.scripted.recovery.lying_cup import grasp_by_handle, lying_handle_grasp, place_by_handle
 from pipeline.policies.scripted.recovery.stand_book import quarter_turn, stand_tilt, stand_up, too_steep
+from pipeline.policies.scripted.skills import place
 from pipeline.policies.scripted.stack import carried
-from pipeline.policies.scripted.skills import Ctx, Plan, box_centre_offset, destination, free_hand, grasp, place
 
 TURN_TOL = 0.15  # radians of yaw still to turn at which the hand may go down to grasp
 
@@ -41,19 +44,19 @@ def pick_place_once(ctx: Ctx, conjunct: tuple[str, ...], attempt: int) -> Plan:
             yield from grasp_by_handle(ctx, obj, handle, hover_m=0.08 + 0.03 * min(attempt, 2))
         else:
             yield from free_hand(ctx)
-            dest = destination(ctx, obj, target)
+            dest = destination(ctx.scene, obj, target)
             # a candidate whose fingers land clear of other objects (they would be clamped too)
             choice = checks.clear_grasp_choice(s, obj, dest, attempt)
             yield from grasp(ctx, obj, dest, choice=choice, g=slide_clear(s, obj, plan_grasp(s, obj, dest, choice)),
                              hover_m=0.08 + 0.03 * min(attempt, 2), turn_tol=TURN_TOL)
         if not carried(s, obj, checks.held(s)):
-            ctx.events.append(f"missed_grasp:{obj}")
+            ctx.events.append(Note(Outcome.MISSED_GRASP, obj))
             if ctx.truth is not None:
                 ctx.truth.end_hand(obj, False)
             return
     if by_handle:
         yield from place_by_handle(ctx, obj, target)
-    elif lying_long(s, obj) and s.env.is_region(target) and not s.env.region(target)["joints"]:
+    elif lying_long(s, obj) and s.env.is_region(target) and not s.env.region(target).joints:
         # its body origin is at one end (a bottle's base): centre its length on the region
         # instead, or most of it hangs past one end and it slides off (measured: a bottle
         # laid on the rack by its base fell off behind it); a pan slid onto a shelf keeps its way
@@ -63,4 +66,4 @@ def pick_place_once(ctx: Ctx, conjunct: tuple[str, ...], attempt: int) -> Plan:
     if ctx.truth is not None:
         ctx.truth.end_hand(obj, s.satisfied(conjunct))
     if not s.satisfied(conjunct) and not carried(s, obj, checks.held(s)):
-        ctx.events.append(f"misplaced:{obj}")
+        ctx.events.append(Note(Outcome.MISPLACED, obj))

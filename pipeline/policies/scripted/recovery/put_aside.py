@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from pipeline.policies.scripted.motion import Ctx, Plan, free_hand, grasp, place_at
 from pipeline.policies.scripted.recovery import checks
 from pipeline.policies.scripted.recovery.reasons import GiveUp, GiveUpReason
-from pipeline.policies.scripted.skills import Ctx, Plan, free_hand, grasp, place_at
 
 # the palm reaches ~10 cm either way along its closing axis: carrying an object aside, the
 # whole hand keeps above what it passes (measured: a pudding carried aside past a part-open

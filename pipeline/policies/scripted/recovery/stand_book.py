@@ -27,10 +27,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.policies.scripted.grasps import SLAB_GRIP_BELOW_TOP, SLAB_RATIO, SLAB_THIN_M, closing_yaw
+from pipeline.policies.scripted.grasps import SLAB_GRIP_BELOW_TOP, SLAB_RATIO, SLAB_THIN_M
+
+from pipeline.policies.scripted.hand import closing_yaw
+from pipeline.policies.scripted.motion import HAND_CLEARANCE, Ctx, Plan, travel
 from pipeline.policies.scripted.primitives import Grip, axis_angle_matrix, hand_orientation, rotation_error
 from pipeline.policies.scripted.scene import Scene
-from pipeline.policies.scripted.skills import HAND_CLEARANCE, Ctx, Plan, travel
 
 UPRIGHT_DEG = 20.0  # up axis within this of vertical: standing, grasped from above as usual
 MAX_TILT = np.radians(75.0)  # most the hand is tilted from pointing down (further: out of reach)

@@ -16,13 +16,15 @@ import numpy as np
 
 from pipeline.policies.scripted.articulated import FINGER_HALF, handle_box, open_sign, part_joint
 from pipeline.policies.scripted.drawer_room import drag_out
+from pipeline.policies.scripted.goal import Conjunct, Predicate
 from pipeline.policies.scripted.grasps import plan_grasp
+from pipeline.policies.scripted.motion import Ctx, Plan, free_hand, grasp, place_at, travel
+from pipeline.policies.scripted.notes import Outcome
 from pipeline.policies.scripted.primitives import Grip
 from pipeline.policies.scripted.recovery import checks
 from pipeline.policies.scripted.recovery.operate import operate_once
 from pipeline.policies.scripted.recovery.put_aside import goal_points
 from pipeline.policies.scripted.recovery.reasons import GiveUp, GiveUpReason
-from pipeline.policies.scripted.skills import Ctx, Plan, free_hand, grasp, place_at, travel
 
 HAND_PAD_M = 0.01  # pushed this far past the object's edge
 # a drawer out at least this far is dragged out again by a fist behind its front wall (the
@@ -33,7 +35,7 @@ FIST_ROOM_M = 0.06
 def pull_side(env, joint: str) -> tuple[int, float]:
     """The world axis (0: x, 1: y) the drawer of `joint` opens along, and its sign."""
     fr = env.joint_frame(joint)
-    pull = fr["axis"] * open_sign(fr["range"])
+    pull = fr.axis * open_sign(fr.range)
     k = int(np.argmax(np.abs(pull[:2])))
     return k, float(np.sign(pull[k]))
 
@@ -91,7 +93,7 @@ def push_in(ctx: Ctx, joint: str, dist: float) -> Plan:
     """A fist at the drawer's front pushes it in by `dist` (the fist closes on the way)."""
     s, env = ctx.scene, ctx.scene.env
     fr = env.joint_frame(joint)
-    pull = fr["axis"] * open_sign(fr["range"])
+    pull = fr.axis * open_sign(fr.range)
     box, k, d = handle_box(env, joint, pull)
     front = box[1, k] if d > 0 else box[0, k]
     pos = (box[0] + box[1]) / 2
@@ -115,14 +117,14 @@ def clear_from_under(ctx: Ctx, obj: str, region: str, attempt: int = 0) -> Plan:
     s, env = ctx.scene, ctx.scene.env
     joint = part_joint(env, region)
     fr = env.joint_frame(joint)
-    sign = open_sign(fr["range"])
-    out = sign * fr["qpos"]  # how far out it is now
+    sign = open_sign(fr.range)
+    out = sign * fr.qpos  # how far out it is now
     dist = min(uncover_distance(ctx, obj, joint), out)
-    ctx.begin("close", ("close", region), region)
+    ctx.begin("close", Conjunct(Predicate.CLOSE, region), region)
     yield from push_in(ctx, joint, dist)
     covered = checks.overhanging_drawer(s, obj, pad=0.0) is not None
     if ctx.truth is not None:
-        ctx.end("half_open" if covered else "achieved", f"{joint} at {env.joint_frame(joint)['qpos']:.3f}")
+        ctx.end(Outcome.HALF_OPEN if covered else Outcome.ACHIEVED, f"{joint} at {env.joint_frame(joint).qpos:.3f}")
     if covered:
         return
     sweep = checks.drawer_sweep(s, joint)
@@ -142,13 +144,13 @@ def clear_from_under(ctx: Ctx, obj: str, region: str, attempt: int = 0) -> Plan:
     yield from place_at(ctx, obj, spot)
     if sweep is not None and checks.under_sweep(s, obj, sweep):
         return  # still in the way: the planner decides again
-    if sign * env.joint_frame(joint)["qpos"] < FIST_ROOM_M:
-        yield from operate_once(ctx, ("open", region))
+    if sign * env.joint_frame(joint).qpos < FIST_ROOM_M:
+        yield from operate_once(ctx, Conjunct(Predicate.OPEN, region))
         return
-    ctx.begin("open", ("open", region), region)
+    ctx.begin("open", Conjunct(Predicate.OPEN, region), region)
     # close the fist while rising off the set-aside object (drag_out closes it standing still)
     yield ctx.move(s.eef() + [0, 0, 0.06], gripper=1.0, yaw=ctx.yaw_hold, tol=0.02, max_steps=12, label="fist")
     yield from drag_out(ctx, joint)
     if ctx.truth is not None:
-        ctx.end("achieved" if env.object_state(region).is_open() else "half_open",
-                f"{joint} at {env.joint_frame(joint)['qpos']:.3f}")
+        ctx.end(Outcome.ACHIEVED if env.object_state(region).is_open() else Outcome.HALF_OPEN,
+                f"{joint} at {env.joint_frame(joint).qpos:.3f}")
