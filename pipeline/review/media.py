@@ -44,23 +44,14 @@ def safe_path(run_dir: Path, rel: str) -> Path | None:
 _EVIDENCE_COLUMNS = ("step", "time_s", "gripper_opening", "grasped", "contacts", "displacement", "goal_progress")
 
 
-def _stamp(path: Path) -> tuple[str, int, int]:
+def stamp(path: Path) -> tuple[str, int, int]:
     st = os.stat(path)
     return str(path), st.st_mtime_ns, st.st_size
 
 
 def evidence(path: Path) -> dict:
     """The EVIDENCE_SCHEMA table as columns; displacement becomes one series per object."""
-    return _evidence(*_stamp(path))
-
-
-def evidence_json(path: Path) -> bytes:
-    """`evidence` encoded once (encoding thousands of floats per request costs more than reading)."""
-    return table_json("evidence", path)
-
-
-def frames_json(path: Path) -> bytes:
-    return table_json("frames", path)
+    return _evidence(*stamp(path))
 
 
 _ENCODED: dict[tuple, bytes] = {}  # (kind, path, mtime, size) -> the encoded table
@@ -71,7 +62,7 @@ def table_json(kind: str, path: Path) -> bytes:
     """The `kind` ("evidence" or "frames") table of `path`, encoded (cached by file stamp)."""
     import json
 
-    key = (kind, *_stamp(path))
+    key = (kind, *stamp(path))
     body = _ENCODED.get(key)
     if body is None:
         table = _evidence(*key[1:]) if kind == "evidence" else _frames(*key[1:])
@@ -80,11 +71,6 @@ def table_json(kind: str, path: Path) -> bytes:
             _ENCODED.clear()
         _ENCODED[key] = body
     return body
-
-
-def cached_table_json(kind: str, path: Path) -> bytes | None:
-    """`table_json` if it is cached (no file is read: safe to call in the event loop), else None."""
-    return _ENCODED.get((kind, *_stamp(path)))
 
 
 @lru_cache(maxsize=256)
@@ -118,7 +104,7 @@ def _evidence(path: str, _mtime: int, _size: int) -> dict:
 
 def frames(path: Path) -> dict:
     """The FRAME_SCHEMA table as columns (frame i shows the state at `time_s[i]`)."""
-    return _frames(*_stamp(path))
+    return _frames(*stamp(path))
 
 
 @lru_cache(maxsize=256)

@@ -1,0 +1,76 @@
+"""What every route depends on: the server's context, the acting person, a database session.
+
+Inputs: the request (its bearer token or session cookie and CSRF header) and the app's state.
+Outputs: FastAPI dependencies, used as annotated parameters (`UserDep`, `WriteDb`, ...).
+Invariants: every dependency that touches the database is a plain `def`, so FastAPI runs it
+in its threadpool, never on the event loop; a route lists the person before the session,
+so nobody unauthenticated opens a write transaction; `WriteDb` commits (or rolls back on
+any error) before the response is sent (`scope="function"`), so an acknowledged write is
+stored.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Annotated
+
+from fastapi import Depends, Request
+from sqlalchemy.engine import Engine
+from sqlalchemy.orm import Session
+
+from pipeline.review import auth
+from pipeline.review.db import User, read_session, write_session
+from pipeline.review.workflow import QueueSettings
+
+
+@dataclass(frozen=True)
+class ServerContext:
+    run_dir: Path
+    engine: Engine
+    settings: QueueSettings
+
+
+async def get_ctx(request: Request) -> ServerContext:  # no I/O: no threadpool hop
+    return request.app.state.review
+
+
+CtxDep = Annotated[ServerContext, Depends(get_ctx)]
+
+
+def current_principal(request: Request, ctx: CtxDep) -> auth.Principal:
+    header = request.headers.get("authorization", "")
+    bearer = header[7:].strip() if header.lower().startswith("bearer ") else None
+    return auth.authenticate(ctx.engine, request.method, bearer, request.cookies.get(auth.COOKIE),
+                             request.headers.get(auth.CSRF_HEADER))
+
+
+PrincipalDep = Annotated[auth.Principal, Depends(current_principal)]
+
+
+async def current_user(p: PrincipalDep) -> User:
+    return p.user
+
+
+async def current_adjudicator(p: PrincipalDep) -> User:
+    auth.require_role(p.user, "adjudicator")
+    return p.user
+
+
+UserDep = Annotated[User, Depends(current_user)]
+AdjudicatorDep = Annotated[User, Depends(current_adjudicator)]
+
+
+def read_db(ctx: CtxDep) -> Iterator[Session]:
+    with read_session(ctx.engine) as s:
+        yield s
+
+
+def write_db(ctx: CtxDep) -> Iterator[Session]:
+    with write_session(ctx.engine) as s:
+        yield s
+
+
+ReadDb = Annotated[Session, Depends(read_db, scope="function")]
+WriteDb = Annotated[Session, Depends(write_db, scope="function")]
