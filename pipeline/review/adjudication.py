@@ -21,7 +21,7 @@ from pipeline.review import audit
 from pipeline.review.db import Adjudication, Item, Review, User, now
 from pipeline.review.errors import Forbidden, Invalid, Stale
 from pipeline.review.fields import FieldError, snap_step, validate_field
-from pipeline.review.workflow import QueueSettings, get_item
+from pipeline.review.workflow import QueueSettings, get_item, idempotency_key
 from pipeline.vocab import ItemStatus, Resolution
 
 CLAIM_SECONDS = 1800
@@ -55,9 +55,7 @@ def claim(s: Session, user: User, item_id: int) -> Item:
 def adjudicate(s: Session, user: User, item_id: int, body: dict, cfg: QueueSettings) -> tuple[Adjudication, bool]:
     """Decide the disputed fields; return (the adjudication, whether it was a harmless repeat)."""
     item = get_item(s, item_id, lock=True)
-    key = str(body.get("idempotency_key") or "")
-    if not key:
-        raise Invalid("idempotency_key: required (any unique string per decision)", field="idempotency_key")
+    key = idempotency_key(body)
     done = s.scalar(select(Adjudication).where(Adjudication.item_id == item.id))
     if done is not None and done.idempotency_key == key:
         return done, True

@@ -205,6 +205,18 @@ def lease_next(s: Session, user: User, cfg: QueueSettings, tries: int = 8) -> It
     return None
 
 
+KEY_CHARS = 100  # the idempotency_key columns' width
+
+
+def idempotency_key(body: dict) -> str:
+    key = str(body.get("idempotency_key") or "")
+    if not key:
+        raise Invalid("idempotency_key: required (any unique string per decision)", field="idempotency_key")
+    if len(key) > KEY_CHARS:
+        raise Invalid(f"idempotency_key: at most {KEY_CHARS} characters", field="idempotency_key")
+    return key
+
+
 def _values_for(item: Item, decision: str, fields: dict | None, reason: str | None,
                 cfg: QueueSettings) -> tuple[str, dict | None, list[str]]:
     """(the decision as stored, its resolved values, the fields edited against the proposal)."""
@@ -235,9 +247,7 @@ def _same(r: Review, decision: str, values: dict | None, reason: str | None) -> 
 def submit_review(s: Session, user: User, item_id: int, body: dict, cfg: QueueSettings) -> tuple[Review, bool]:
     """Store a decision; return (the review, whether it was a harmless repeat)."""
     item = get_item(s, item_id, lock=True)
-    decision, key = body.get("decision"), str(body.get("idempotency_key") or "")
-    if not key:
-        raise Invalid("idempotency_key: required (any unique string per decision)", field="idempotency_key")
+    decision, key = body.get("decision"), idempotency_key(body)
     mine = s.scalar(select(Review).where(Review.item_id == item.id, Review.reviewer_id == user.id))
     if mine is not None and mine.idempotency_key == key:
         return mine, True
