@@ -113,14 +113,23 @@ def _reviewers(url: str, tokens: list[tuple[int, str]], think_mean_s: float, see
             if think_mean_s and stop.wait(rng.uniform(0, think_mean_s)):
                 return
             while time.time() < stop_at:
-                nxt = c.post("/api/queue/next").json()["item"]
+                n = c.post("/api/queue/next")
+                if n.status_code != 200:
+                    with lock:
+                        errors.append(f"queue/next {n.status_code} {n.text[:120]}")
+                    continue
+                nxt = n.json()["item"]
                 if nxt is None:
                     return
                 t0 = time.perf_counter()
                 r = c.get(f"/api/items/{nxt}")
-                c.get(f"/api/items/{nxt}/frames")
-                c.get(f"/api/items/{nxt}/evidence")
+                bad = [x for x in (r, c.get(f"/api/items/{nxt}/frames"), c.get(f"/api/items/{nxt}/evidence"))
+                       if x.status_code != 200]
                 t1 = time.perf_counter()
+                if bad:
+                    with lock:
+                        errors.extend(f"{x.url.path} {x.status_code} {x.text[:120]}" for x in bad)
+                    continue
                 if think_mean_s:  # a person watching the clip before deciding
                     think = rng.gammavariate(4.0, think_mean_s / 4.0)
                     if stop.wait(min(think, max(0.0, stop_at - time.time()))) or time.time() >= stop_at:
@@ -211,9 +220,10 @@ class Server:
         self.url = f"http://127.0.0.1:{self.port}"
         env = {**os.environ, "PYTHONUNBUFFERED": "1",
                "PYTHONPATH": os.pathsep.join([str(code), os.environ.get("PYTHONPATH", "")])}
+        self.log = cfg.with_suffix(".log")  # a file, not a pipe: a full pipe would stall the server
         self.proc = subprocess.Popen([sys.executable, "-c", "from pipeline.cli import app; app()", "review", "serve",
                                       "--config", str(cfg), "--port", str(self.port), "--workers", str(workers)],
-                                     cwd=code, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env)
+                                     cwd=code, stdout=subprocess.DEVNULL, stderr=open(self.log, "wb"), env=env)
         deadline = time.monotonic() + 60
         while True:
             try:
@@ -222,7 +232,7 @@ class Server:
             except httpx.HTTPError:
                 pass
             if self.proc.poll() is not None or time.monotonic() > deadline:
-                raise RuntimeError(f"server did not start: {self.proc.stderr.read().decode()[-2000:]}")
+                raise RuntimeError(f"server did not start: {self.log.read_text()[-2000:]}")
             time.sleep(0.2)
 
     def stop(self) -> None:
@@ -260,6 +270,9 @@ def run_config(name: str, code: Path, db_url: str, workers: int, run: Path, tmp:
                 res["db_cpu_ms_per_item"] = round((cpu_s(pg_pid) - db0) * 1000 / n_dec, 2)
             res.update(check(engine, res.pop("_acked")))
             out[mode] = res
+            if res["refused"]:
+                tail = [ln for ln in server.log.read_text(errors="replace").splitlines() if "Error" in ln][-3:]
+                print(f"  {name} {mode}: refusals {res['errors'][:3]}; server log: {tail}", flush=True)
             print(f"  {name} {mode}: {json.dumps({k: v for k, v in res.items() if k != 'errors'})}", flush=True)
     finally:
         server.stop()

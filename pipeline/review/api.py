@@ -29,6 +29,7 @@ from sqlalchemy.engine import Engine
 
 from pipeline.review.deps import ServerContext
 from pipeline.review.errors import ReviewError
+from pipeline.review.limits import RequestLimits
 from pipeline.review.routes import adjudication, admin, items, media, queue, session
 from pipeline.review.workflow import QueueSettings
 
@@ -95,7 +96,8 @@ def create_app(run_dir: str | Path, engine: Engine, settings: QueueSettings, ui_
     app.state.review = ServerContext(Path(run_dir).resolve(), engine, settings)
     app.add_exception_handler(RequestValidationError, _validation_error)
     app.add_exception_handler(ReviewError, lambda _r, e: JSONResponse(status_code=e.status, content=e.body()))
-    app.add_middleware(SecurityHeaders)
+    app.add_middleware(RequestLimits)  # before routing, authentication and parsing
+    app.add_middleware(SecurityHeaders)  # outermost: the limits' answers get the headers too
     for module in (session, queue, items, adjudication, admin, media):
         app.include_router(module.router)
     if docs:

@@ -4,7 +4,8 @@ Inputs: the request (its bearer token or session cookie and CSRF header) and the
 Outputs: FastAPI dependencies, used as annotated parameters (`UserDep`, `WriteDb`, ...).
 Invariants: every dependency that touches the database is a plain `def`, so FastAPI runs it
 in its threadpool, never on the event loop; a route lists the person before the session,
-so nobody unauthenticated opens a write transaction; `WriteDb` commits (or rolls back on
+so nobody unauthenticated opens a write transaction; a request body is read and
+parsed only after the caller is known (`json_body`), and only JSON (a 422 otherwise); `WriteDb` commits (or rolls back on
 any error) before the response is sent (`scope="function"`), so an acknowledged write is
 stored.
 """
@@ -12,16 +13,19 @@ stored.
 from __future__ import annotations
 
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated
 
-from fastapi import Depends, Request
+from fastapi import Depends, Path as PathParam, Request
+from fastapi.exceptions import RequestValidationError
+from pydantic import BaseModel, ValidationError
 from sqlalchemy.engine import Engine
 from sqlalchemy.orm import Session
 
 from pipeline.review import auth
 from pipeline.review.db import User, read_session, write_session
+from pipeline.review.media import VideoAllowlist
 from pipeline.review.workflow import QueueSettings
 
 
@@ -30,6 +34,7 @@ class ServerContext:
     run_dir: Path
     engine: Engine
     settings: QueueSettings
+    videos: VideoAllowlist = field(default_factory=VideoAllowlist)
 
 
 async def get_ctx(request: Request) -> ServerContext:  # no I/O: no threadpool hop
@@ -74,3 +79,26 @@ def write_db(ctx: CtxDep) -> Iterator[Session]:
 
 ReadDb = Annotated[Session, Depends(read_db, scope="function")]
 WriteDb = Annotated[Session, Depends(write_db, scope="function")]
+
+
+# item ids are the database's 32-bit integers: anything else is a 422, never a database error
+ItemId = Annotated[int, PathParam(ge=1, le=2**31 - 1)]
+
+
+def json_body(model: type[BaseModel]):
+    """A dependency giving the request's JSON body as `model`, read and parsed only after the
+    caller is authenticated (it depends on `current_user`, which runs first). Errors are
+    FastAPI's 422s (the `field` named, `api._validation_error`); JSON nested too deep for the
+    parser is one of them."""
+
+    async def parse(request: Request, _user: UserDep) -> BaseModel:
+        kind = request.headers.get("content-type", "").split(";")[0].strip().lower()
+        if kind != "application/json":
+            raise RequestValidationError([{"type": "content_type", "loc": ("body",), "input": None,
+                                           "msg": "send JSON (Content-Type: application/json)"}])
+        try:
+            return model.model_validate_json(await request.body())
+        except ValidationError as e:
+            raise RequestValidationError([{**err, "loc": ("body", *err["loc"])} for err in e.errors()]) from None
+
+    return Depends(parse)

@@ -3,20 +3,44 @@
 Inputs: the run folder and a path relative to it (as stored in an item's context).
 Outputs: a resolved path inside the run folder, or None; evidence and frame tables as
 JSON-ready columns.
-Invariants: nothing outside the run's stage1/ and stage2/ folders is ever served, whatever
-the request says (`..`, absolute paths, symlinks pointing out, NUL bytes, the exported
-labels under stage3/): `safe_path` returns None and the API answers 404. Tables are cached by (path, mtime, size), so a rewritten file is reread.
+Invariants: `/media/` serves only the videos items show (`VideoAllowlist`), and nothing
+outside the run's stage1/ and stage2/ folders is ever read, whatever the request says (`..`,
+absolute paths, symlinks pointing out, NUL bytes, the exported labels under stage3/):
+`safe_path` returns None and the API answers 404. Tables are cached by (path, mtime, size), so a rewritten file is reread.
 """
 
 from __future__ import annotations
 
 import os
+import threading
+import time
 from functools import lru_cache
 from pathlib import Path
 
 from pipeline.layout import RunLayout
 
 ALLOWED_SUFFIXES = {".mp4", ".webm", ".parquet", ".png", ".jpg", ".json"}
+RELOAD_S = 2.0
+
+
+class VideoAllowlist:
+    """What `/media/` may serve: the videos the page shows, i.e. the paths in some item's
+    `context.videos`, never a folder (a run's stage1/ also holds the generator's truth and
+    the logged steps). `load` reads those paths from the database; it runs again when a
+    path is not known yet (new items), at most every RELOAD_S seconds."""
+
+    def __init__(self):
+        self.paths: frozenset[str] = frozenset()
+        self.loaded = float("-inf")
+        self.lock = threading.Lock()
+
+    def allows(self, rel: str, load) -> bool:
+        if rel in self.paths:
+            return True
+        with self.lock:
+            if time.monotonic() - self.loaded >= RELOAD_S:
+                self.paths, self.loaded = frozenset(load()), time.monotonic()
+        return rel in self.paths
 
 
 def _allowed(root: Path) -> tuple[Path, Path]:

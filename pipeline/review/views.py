@@ -275,6 +275,11 @@ def progress(s: Session, user: User, tolerance_s: float, control_hz: int = 20) -
     }
 
 
+def video_paths(s: Session) -> set[str]:
+    """Every video an item shows (its `context.videos`): all that `/media/` may serve."""
+    return {p for ctx in s.scalars(select(Item.context)) for p in ((ctx or {}).get("videos") or {}).values() if p}
+
+
 def counts(s: Session) -> dict:
     rows = s.execute(select(Item.status, Item.quarantined, func.count()).group_by(Item.status, Item.quarantined)).all()
     out: dict = {"total": 0, "quarantined": 0, "by_status": {}}

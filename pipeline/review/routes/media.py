@@ -1,6 +1,6 @@
-"""What a reviewer watches: GET /media/<path> (videos, images), and an item's evidence and
-frame tables (GET /api/items/{id}/evidence, /frames). Every file goes through
-`media.safe_path` (the run's stage1/ and stage2/ only). A table never changes under the same
+"""What a reviewer watches: GET /media/<path> (the videos items show, nothing else), and an
+item's evidence and frame tables (GET /api/items/{id}/evidence, /frames). Every file goes
+through `media.safe_path` (the run's stage1/ and stage2/ only). A table never changes under the same
 file stamp, so it carries an ETag and a private cache lifetime (a revalidation is a 304)."""
 
 from __future__ import annotations
@@ -10,8 +10,8 @@ import hashlib
 from fastapi import APIRouter, Request
 from fastapi.responses import FileResponse, Response
 
-from pipeline.review import media, workflow
-from pipeline.review.deps import CtxDep, ReadDb, UserDep
+from pipeline.review import media, views, workflow
+from pipeline.review.deps import CtxDep, ItemId, ReadDb, UserDep
 from pipeline.review.errors import NotFound
 
 router = APIRouter()
@@ -21,8 +21,9 @@ TABLE_CACHE = "private, max-age=300"
 
 
 @router.get("/media/{rel:path}")
-def media_file(rel: str, _user: UserDep, ctx: CtxDep):
-    path = media.safe_path(ctx.run_dir, rel)
+def media_file(rel: str, _user: UserDep, s: ReadDb, ctx: CtxDep):
+    """A video an item shows (`media.VideoAllowlist`), nothing else under the run."""
+    path = media.safe_path(ctx.run_dir, rel) if ctx.videos.allows(rel, lambda: views.video_paths(s)) else None
     if path is None:
         raise NotFound("no such file")
     return FileResponse(path, headers={"Cache-Control": FILE_CACHE})
@@ -41,10 +42,10 @@ def _table(request: Request, ctx, s, item_id: int, kind: str) -> Response:
 
 
 @router.get("/api/items/{item_id}/evidence")
-def evidence(item_id: int, request: Request, _user: UserDep, s: ReadDb, ctx: CtxDep):
+def evidence(item_id: ItemId, request: Request, _user: UserDep, s: ReadDb, ctx: CtxDep):
     return _table(request, ctx, s, item_id, "evidence")
 
 
 @router.get("/api/items/{item_id}/frames")
-def frames(item_id: int, request: Request, _user: UserDep, s: ReadDb, ctx: CtxDep):
+def frames(item_id: ItemId, request: Request, _user: UserDep, s: ReadDb, ctx: CtxDep):
     return _table(request, ctx, s, item_id, "frames")
