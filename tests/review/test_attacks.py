@@ -76,12 +76,14 @@ def test_hostile_json_and_out_of_range_ids_are_4xx_never_500(server, people, ite
     assert ann.get(f"/api/items/{2**31 - 1}").status_code == 404  # in range, no such item
 
 
-@pytest.mark.parametrize("content", [b"not json", b'"a string"', b"[]", b'{"decision": "accept", "version": 0}'])
+@pytest.mark.parametrize("content", [b"not json", b'"a string"', b"[]", b'{"decision": "accept", "version": 0}',
+                                     b'{"decision": "accept", "version": 0, "idempotency_key": "k"} as text/plain'])
 def test_a_malformed_decision_changes_nothing(server, people, items, engine, content):
     from pipeline.review.db import Item, read_session
 
+    content, _, kind = content.partition(b" as ")  # a well-formed decision, but not sent as JSON
     r = client(server, people, "ann").post(f"/api/items/{items[0]}/review", content=content,
-                                           headers={"content-type": "application/json"})
+                                           headers={"content-type": (kind or b"application/json").decode()})
     assert r.status_code == 422 and "detail" in r.json()
     with read_session(engine) as s:
         assert s.get(Item, items[0]).n_reviews == 0
