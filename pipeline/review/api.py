@@ -19,8 +19,10 @@ Routes are thin: the rules live in `workflow`, `adjudication`, `views` and `auth
 
 from __future__ import annotations
 
+from contextlib import asynccontextmanager
 from pathlib import Path
 
+import anyio
 from fastapi import FastAPI, Request
 from fastapi.exceptions import RequestValidationError
 from fastapi.responses import JSONResponse
@@ -34,6 +36,16 @@ from pipeline.review.routes import adjudication, admin, items, media, queue, ses
 from pipeline.review.workflow import QueueSettings
 
 UI_DIR = Path(__file__).resolve().parents[2] / "review_ui"
+# threads per server process for the plain `def` routes and dependencies (anyio's default is
+# 40): with dozens runnable, the one holding SQLite's write lock waits for the GIL behind the
+# others and every writer queues longer; requests beyond these wait, without CPU, in the loop
+REQUEST_THREADS = 8
+
+
+@asynccontextmanager
+async def _lifespan(_app):
+    anyio.to_thread.current_default_thread_limiter().total_tokens = REQUEST_THREADS
+    yield
 
 SECRET_FIELDS = {"token", "csrf", "password"}
 
@@ -92,7 +104,8 @@ class SecurityHeaders:
 def create_app(run_dir: str | Path, engine: Engine, settings: QueueSettings, ui_dir: Path = UI_DIR,
                docs: bool = False) -> FastAPI:
     # FastAPI's own docs routes answer anyone; ours (admin.docs_router) need a user
-    app = FastAPI(title="libero-recover review", docs_url=None, redoc_url=None, openapi_url=None)
+    app = FastAPI(title="libero-recover review", docs_url=None, redoc_url=None, openapi_url=None,
+                  lifespan=_lifespan)
     app.state.review = ServerContext(Path(run_dir).resolve(), engine, settings)
     app.add_exception_handler(RequestValidationError, _validation_error)
     app.add_exception_handler(ReviewError, lambda _r, e: JSONResponse(status_code=e.status, content=e.body()))

@@ -216,11 +216,18 @@ def read_session(engine: Engine) -> Iterator[Session]:
         yield s
 
 
+def writer(engine: Engine) -> Session:
+    """A session whose transactions are writes (BEGIN IMMEDIATE on SQLite, taken at the first
+    statement): use `with s.begin():` around the work, in one thread, so that the write lock
+    is held only while the work runs."""
+    return Session(engine.execution_options(write=True), expire_on_commit=False)
+
+
 @contextmanager
 def write_session(engine: Engine) -> Iterator[Session]:
     """One write transaction (BEGIN IMMEDIATE on SQLite): committed on success, rolled back
     on any exception."""
-    with Session(engine.execution_options(write=True), expire_on_commit=False) as s:
+    with writer(engine) as s:
         with s.begin():
             yield s
 

@@ -3,11 +3,11 @@
 Inputs: the request (its bearer token or session cookie and CSRF header) and the app's state.
 Outputs: FastAPI dependencies, used as annotated parameters (`UserDep`, `WriteDb`, ...).
 Invariants: every dependency that touches the database is a plain `def`, so FastAPI runs it
-in its threadpool, never on the event loop; a route lists the person before the session,
-so nobody unauthenticated opens a write transaction; a request body is read and
-parsed only after the caller is known (`json_body`), and only JSON (a 422 otherwise); `WriteDb` commits (or rolls back on
-any error) before the response is sent (`scope="function"`), so an acknowledged write is
-stored.
+in its threadpool, never on the event loop; a route lists the person first, so nobody
+unauthenticated opens a transaction; a request body is read and parsed only after the caller
+is known (`json_body`), and only JSON (a 422 otherwise); a write route runs its work in
+`with s.begin():` on its `WriteDb`, so it is committed (or rolled back on any error) in the
+route's own thread, before the response is sent: an acknowledged write is stored.
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from sqlalchemy.engine import Engine
 from sqlalchemy.orm import Session
 
 from pipeline.review import auth
-from pipeline.review.db import User, read_session, write_session
+from pipeline.review.db import User, read_session, writer
 from pipeline.review.media import VideoAllowlist
 from pipeline.review.workflow import QueueSettings
 
@@ -73,7 +73,10 @@ def read_db(ctx: CtxDep) -> Iterator[Session]:
 
 
 def write_db(ctx: CtxDep) -> Iterator[Session]:
-    with write_session(ctx.engine) as s:
+    # no transaction here: the route runs `with s.begin():` itself, so the transaction (and
+    # SQLite's write lock) begins and ends inside one threadpool call, never held across the
+    # hops back to the event loop and into another thread for the dependency's exit
+    with writer(ctx.engine) as s:
         yield s
 
 

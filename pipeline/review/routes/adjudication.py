@@ -17,25 +17,30 @@ router = APIRouter(prefix="/api/items")
 
 @router.get("/{item_id}/adjudication")
 def adjudication_page(item_id: ItemId, user: AdjudicatorDep, s: WriteDb):  # writes who read the reviews
-    return JSONResponse(views.adjudication_view(s, workflow.open_reviews(s, user, item_id)))
+    with s.begin():
+        return JSONResponse(views.adjudication_view(s, workflow.open_reviews(s, user, item_id)))
 
 
 @router.post("/{item_id}/claim")
 def claim(item_id: ItemId, user: AdjudicatorDep, s: WriteDb):
-    item = adjudication.claim(s, user, item_id)
-    return {"item": item_id, "version": item.version, "status": item.status}
+    with s.begin():
+        item = adjudication.claim(s, user, item_id)
+        return {"item": item_id, "version": item.version, "status": item.status}
 
 
 @router.post("/{item_id}/adjudication")
 def adjudicate(item_id: ItemId, user: AdjudicatorDep, body: Annotated[AdjudicationIn, json_body(AdjudicationIn)],
                s: WriteDb, ctx: CtxDep):
-    _adj, replayed = adjudication.adjudicate(s, user, item_id, body.payload(), ctx.settings)
-    item = workflow.get_item(s, item_id)
-    return JSONResponse({"replayed": replayed, "status": item.status, "final": item.final,
-                         "resolution": item.resolution})
+    with s.begin():
+        _adj, replayed = adjudication.adjudicate(s, user, item_id, body.payload(), ctx.settings)
+        item = workflow.get_item(s, item_id)
+        return JSONResponse({"replayed": replayed, "status": item.status, "final": item.final,
+                             "resolution": item.resolution})
 
 
 @router.get("/{item_id}/history")
 def history(item_id: ItemId, user: AdjudicatorDep, s: WriteDb):  # spans every revision of the episode
-    workflow.open_reviews(s, user, item_id, whole_episode=True, admin=auth.rank(user.role) >= auth.rank("admin"))
-    return {"item": item_id, "events": audit.history(s, item_id)}
+    with s.begin():
+        workflow.open_reviews(s, user, item_id, whole_episode=True,
+                              admin=auth.rank(user.role) >= auth.rank("admin"))
+        return {"item": item_id, "events": audit.history(s, item_id)}

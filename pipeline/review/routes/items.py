@@ -22,13 +22,15 @@ def item(item_id: ItemId, user: UserDep, s: ReadDb):
 
 @router.post("/{item_id}/lease")
 def lease(item_id: ItemId, user: UserDep, s: WriteDb, ctx: CtxDep):
-    held = workflow.lease_item(s, user, workflow.get_item(s, item_id, lock=True), ctx.settings)
-    return {"item": item_id, "expires_at": audit.iso(held.expires_at)}
+    with s.begin():
+        held = workflow.lease_item(s, user, workflow.get_item(s, item_id, lock=True), ctx.settings)
+        return {"item": item_id, "expires_at": audit.iso(held.expires_at)}
 
 
 @router.post("/{item_id}/review")
 def review(item_id: ItemId, user: UserDep, body: Annotated[DecisionIn, json_body(DecisionIn)], s: WriteDb, ctx: CtxDep):
-    r, replayed = workflow.submit_review(s, user, item_id, body.payload(), ctx.settings)
-    state = "open" if workflow.get_item(s, item_id).status in COLLECTING else "closed"
-    return JSONResponse({"replayed": replayed, "version": r.version, "decision": r.decision, "values": r.values,
-                         "state": state})
+    with s.begin():
+        r, replayed = workflow.submit_review(s, user, item_id, body.payload(), ctx.settings)
+        state = "open" if workflow.get_item(s, item_id).status in COLLECTING else "closed"
+        return JSONResponse({"replayed": replayed, "version": r.version, "decision": r.decision,
+                             "values": r.values, "state": state})

@@ -25,5 +25,6 @@ def progress(user: UserDep, s: ReadDb, ctx: CtxDep):
 
 @router.post("/queue/next")
 def next_item(user: UserDep, s: WriteDb, ctx: CtxDep):
-    item = workflow.lease_next(s, user, ctx.settings)
-    return {"item": item.id if item is not None else None}
+    with s.begin():
+        item = workflow.lease_next(s, user, ctx.settings)
+        return {"item": item.id if item is not None else None}
