@@ -94,6 +94,28 @@ def pct(values: list[float], q: float) -> float:
     return round(values[min(len(values) - 1, int(round(q / 100 * (len(values) - 1))))] * 1000, 1)
 
 
+class _Retrying:
+    """A client that sends a request again once when its connection fails before an answer,
+    as a browser does: after a think time longer than the server's keep-alive timeout (5 s),
+    a pooled connection may be closed just as it is reused. Every request here is safe to
+    repeat (a decision carries its idempotency key)."""
+
+    def __init__(self, client: httpx.Client):
+        self.client = client
+
+    def _send(self, method: str, path: str, **kw) -> httpx.Response:
+        try:
+            return self.client.request(method, path, **kw)
+        except httpx.TransportError:
+            return self.client.request(method, path, **kw)
+
+    def get(self, path: str, **kw) -> httpx.Response:
+        return self._send("GET", path, **kw)
+
+    def post(self, path: str, **kw) -> httpx.Response:
+        return self._send("POST", path, **kw)
+
+
 def _reviewers(url: str, tokens: list[tuple[int, str]], think_mean_s: float, seed: int, stop_at: float,
                barrier, out) -> None:
     """One client process: a thread per reviewer, each looping until `stop_at` (wall clock)
@@ -107,7 +129,8 @@ def _reviewers(url: str, tokens: list[tuple[int, str]], think_mean_s: float, see
 
     def reviewer(token: str, idx: int) -> None:
         rng = random.Random(seed * 100_003 + idx)
-        with httpx.Client(base_url=url, headers={"Authorization": f"Bearer {token}"}, timeout=60) as c:
+        with httpx.Client(base_url=url, headers={"Authorization": f"Bearer {token}"}, timeout=60) as client:
+            c = _Retrying(client)
             barrier.wait()
             # people do not all start at once: a first item somewhere in the first think time
             if think_mean_s and stop.wait(rng.uniform(0, think_mean_s)):
