@@ -247,7 +247,7 @@ class Server:
         self.proc = subprocess.Popen([sys.executable, "-c", "from pipeline.cli import app; app()", "review", "serve",
                                       "--config", str(cfg), "--port", str(self.port), "--workers", str(workers)],
                                      cwd=code, stdout=subprocess.DEVNULL, stderr=open(self.log, "wb"), env=env)
-        deadline = time.monotonic() + 60
+        deadline = time.monotonic() + 300  # imports alone take a minute on a busy 2-core machine
         while True:
             try:
                 if httpx.get(self.url + "/", timeout=1).status_code == 200:
