@@ -153,6 +153,7 @@ def lease_item(s: Session, user: User, item: Item, cfg: QueueSettings) -> Lease:
 
 _last_sweep: dict[str, float] = {}  # database URL -> time of the last sweep
 SWEEP_EVERY_S = 5.0
+QUEUE_PAGE = 64  # open items lease_next examines at a time
 
 
 def _sweep_key(s: Session | Engine) -> str:
@@ -176,32 +177,42 @@ def lease_next(s: Session, user: User, cfg: QueueSettings, tries: int = 8) -> It
     if sweep_due(s, t):
         expire(s, t)
         _last_sweep[_sweep_key(s)] = t
+    # the items the user holds, found from their leases (a handful), not by walking the items
+    mine = s.scalars(select(Lease.item_id).where(Lease.user_id == user.id, Lease.expires_at > t)).all()
     held = s.scalar(
-        select(Item).join(Lease, Lease.item_id == Item.id)
-        .where(Lease.user_id == user.id, Lease.expires_at > t, Item.status.in_(COLLECTING), ~_reviewed_by(user.id),
-               ~_read_reviews_of(user))
+        select(Item).where(Item.id.in_(mine), Item.status.in_(COLLECTING), ~_reviewed_by(user.id),
+                           ~_read_reviews_of(user))
         .order_by(Item.id).limit(1).with_for_update(of=Item)
-    )
+    ) if mine else None
     if held is not None:
         lease_item(s, user, held, cfg)
         return held
     leases = select(func.count(Lease.id)).where(Lease.item_id == Item.id, Lease.expires_at > t).scalar_subquery()
     passed: list[int] = []
-    for _ in range(tries):
-        item = s.scalar(
-            select(Item)
-            .where(Item.status.in_(COLLECTING), Item.n_reviews + leases < Item.required_reviews,
-                   ~_reviewed_by(user.id), ~_read_reviews_of(user), Item.id.not_in(passed))
-            .order_by(Item.quarantined, Item.n_reviews.desc(), Item.id).limit(1)
-            .with_for_update(skip_locked=True, of=Item)
-        )
-        if item is None:
+    order = (Item.quarantined, Item.n_reviews.desc(), Item.id)
+    # the open items in queue order, a page at a time: the conditions below (correlated
+    # subqueries) then run on a page, not on every open item of a long queue
+    for page in range(10_000):
+        ids = s.scalars(select(Item.id).where(Item.status.in_(COLLECTING)).order_by(*order)
+                        .limit(QUEUE_PAGE).offset(page * QUEUE_PAGE)).all()
+        if not ids:
             return None
-        try:
-            lease_item(s, user, item, cfg)  # refuses before it writes anything
-            return item
-        except Stale:
-            passed.append(item.id)
+        while len(passed) < tries:
+            item = s.scalar(
+                select(Item)
+                .where(Item.id.in_(ids), Item.status.in_(COLLECTING), Item.n_reviews + leases < Item.required_reviews,
+                       ~_reviewed_by(user.id), ~_read_reviews_of(user), Item.id.not_in(passed))
+                .order_by(*order).limit(1).with_for_update(skip_locked=True, of=Item)
+            )
+            if item is None:
+                break  # nothing open to this user on this page: the next page
+            try:
+                lease_item(s, user, item, cfg)  # refuses before it writes anything
+                return item
+            except Stale:
+                passed.append(item.id)
+        if len(passed) >= tries:
+            return None
     return None
 
 
