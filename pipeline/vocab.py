@@ -101,6 +101,24 @@ class Decision(StrEnum):
     flag = "flag"
 
 
+class ItemStatus(StrEnum):
+    """Where a review item is (pipeline/review/workflow.py and adjudication.py move it):
+    pending -> leased -> reviewed (k of K) -> final | conflict -> adjudicating -> final;
+    superseded when a new revision of the episode replaces it."""
+
+    pending = "pending"
+    leased = "leased"
+    reviewed = "reviewed"
+    conflict = "conflict"
+    adjudicating = "adjudicating"
+    final = "final"
+    superseded = "superseded"
+
+
+# the states in which an item still collects reviews (its reviews stay hidden meanwhile)
+COLLECTING = (ItemStatus.pending, ItemStatus.leased, ItemStatus.reviewed)
+
+
 class Resolution(StrEnum):
     """How a review item became final."""
 

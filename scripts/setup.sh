@@ -16,12 +16,14 @@ ldconfig -p | grep -q 'libEGL.so.1' || need_apt+=(libegl1)
 ldconfig -p | grep -q 'libGL.so.1' || need_apt+=(libgl1)
 ls /usr/share/glvnd/egl_vendor.d/*mesa* >/dev/null 2>&1 || need_apt+=(libegl-mesa0 libgl1-mesa-dri)
 if [ "${WITH_BROWSER:-0}" = 1 ] && ! command -v chromium >/dev/null; then need_apt+=(chromium); fi
+# the review tests start a throwaway PostgreSQL server (tests/pg_cluster.py) from Debian's binaries
+if [ "${WITH_POSTGRES:-0}" = 1 ] && ! ls /usr/lib/postgresql/*/bin/postgres >/dev/null 2>&1; then need_apt+=(postgresql); fi
 if [ ${#need_apt[@]} -gt 0 ]; then
   if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null; then
     log "installing system packages: ${need_apt[*]}"
     apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${need_apt[@]}" >/dev/null
   else
-    echo "setup: missing system packages ${need_apt[*]} (needed for headless EGL rendering); install them with your package manager" >&2
+    echo "setup: missing system packages ${need_apt[*]} (EGL for headless rendering; chromium/postgresql for the tests); install them with your package manager" >&2
     exit 1
   fi
 fi

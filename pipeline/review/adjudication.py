@@ -18,11 +18,11 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from pipeline.review import audit
-from pipeline.review.db import ADJUDICATING, CONFLICT, FINAL, Adjudication, Item, Review, User, now
+from pipeline.review.db import Adjudication, Item, Review, User, now
 from pipeline.review.errors import Forbidden, Invalid, Stale
 from pipeline.review.fields import FieldError, snap_step, validate_field
-from pipeline.review.workflow import QueueSettings, get_item
-from pipeline.vocab import Resolution
+from pipeline.review.workflow import QueueSettings, get_item, idempotency_key
+from pipeline.vocab import ItemStatus, Resolution
 
 CLAIM_SECONDS = 1800
 
@@ -33,20 +33,20 @@ def _check_not_reviewer(s: Session, user: User, item: Item) -> None:
 
 
 def _check_claimable(user: User, item: Item, t: float) -> None:
-    if item.status == ADJUDICATING and item.adjudicator_id != user.id and (item.adjudication_lease_until or 0) > t:
+    if item.status == ItemStatus.adjudicating and item.adjudicator_id != user.id and (item.adjudication_lease_until or 0) > t:
         raise Stale(f"item {item.id} is being adjudicated by someone else", current={"version": item.version})
-    if item.status not in (CONFLICT, ADJUDICATING):
+    if item.status not in (ItemStatus.conflict, ItemStatus.adjudicating):
         raise Stale(f"item {item.id} is {item.status}, not in conflict", current={"status": item.status})
 
 
 def claim(s: Session, user: User, item_id: int) -> Item:
-    item = get_item(s, item_id)
+    item = get_item(s, item_id, lock=True)
     _check_not_reviewer(s, user, item)
     t = now()
     _check_claimable(user, item, t)
-    if item.status != ADJUDICATING or item.adjudicator_id != user.id:
-        audit.record(s, user.name, "claimed", item, {"status": item.status}, {"status": ADJUDICATING})
-        item.status, item.adjudicator_id = ADJUDICATING, user.id
+    if item.status != ItemStatus.adjudicating or item.adjudicator_id != user.id:
+        audit.record(s, user.name, "claimed", item, {"status": item.status}, {"status": ItemStatus.adjudicating})
+        item.status, item.adjudicator_id = ItemStatus.adjudicating, user.id
         item.version += 1
     item.adjudication_lease_until = t + CLAIM_SECONDS
     return item
@@ -54,15 +54,13 @@ def claim(s: Session, user: User, item_id: int) -> Item:
 
 def adjudicate(s: Session, user: User, item_id: int, body: dict, cfg: QueueSettings) -> tuple[Adjudication, bool]:
     """Decide the disputed fields; return (the adjudication, whether it was a harmless repeat)."""
-    item = get_item(s, item_id)
-    key = str(body.get("idempotency_key") or "")
-    if not key:
-        raise Invalid("idempotency_key: required (any unique string per decision)", field="idempotency_key")
+    item = get_item(s, item_id, lock=True)
+    key = idempotency_key(body)
     done = s.scalar(select(Adjudication).where(Adjudication.item_id == item.id))
     if done is not None and done.idempotency_key == key:
         return done, True
     _check_not_reviewer(s, user, item)
-    if item.status == FINAL:
+    if item.status == ItemStatus.final:
         raise Stale(f"item {item.id} is final and cannot be edited; a new revision goes through the queue",
                     current={"status": item.status})
     _check_claimable(user, item, now())
@@ -84,11 +82,11 @@ def adjudicate(s: Session, user: User, item_id: int, body: dict, cfg: QueueSetti
         final = {**(item.agreed or {}), **values}
         final["fail_step"] = snap_step(final["fail_time_s"], (item.context or {}).get("control_hz", cfg.control_hz))
         item.final, item.resolution = final, Resolution.adjudicated
-    item.status, item.adjudicator_id, item.adjudication_lease_until = FINAL, user.id, None
+    item.status, item.adjudicator_id, item.adjudication_lease_until = ItemStatus.final, user.id, None
     item.finalized_at, item.version = now(), item.version + 1
     s.flush()
     audit.record(s, user.name, "adjudicated", item, before,
-                 {"status": FINAL, "final": item.final, "resolution": item.resolution, "values": values},
+                 {"status": ItemStatus.final, "final": item.final, "resolution": item.resolution, "values": values},
                  detail=rationale)
     return adj, False
 

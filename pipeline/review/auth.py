@@ -24,7 +24,7 @@ from sqlalchemy import delete, select
 from sqlalchemy.engine import Engine
 from sqlalchemy.orm import Session
 
-from pipeline.review import audit, fastread, rawsql
+from pipeline.review import audit
 from pipeline.review.db import Lease, User, WebSession, now, read_session, write_session
 from pipeline.review.errors import Forbidden, ReviewError
 
@@ -123,27 +123,27 @@ def sign_out(engine: Engine, sid: str) -> None:
 
 @dataclass
 class Principal:
-    user: fastread.Actor  # the User row's attributes (no ORM instance: see fastread.Actor)
+    user: User  # detached from its session: its attributes only are read
     csrf: str | None  # None when authenticated by bearer token
 
 
 def authenticate(engine: Engine, method: str, bearer: str | None, cookie: str | None, csrf: str | None) -> Principal:
-    """The acting user of a request; raises 401 (who are you) or 403 (CSRF).
-
-    Runs on every request: one prebuilt statement, no ORM session (`fastread`)."""
-    with rawsql.reading(engine) as cur:
+    """The acting user of a request; raises 401 (who are you) or 403 (CSRF)."""
+    with read_session(engine) as s:
         if bearer:
-            row = cur.first(fastread.BY_TOKEN, h=hash_token(bearer))
-            if row is None or not row.active:
+            user = user_by_token(s, bearer)
+            if user is None:
                 raise Unauthorized("unknown or disabled token")
-            return Principal(fastread.user_from(row), None)
+            return Principal(user, None)
         if not cookie:
             raise Unauthorized("sign in first")
-        row = cur.first(fastread.BY_SESSION, h=hash_token(cookie))
-    if row is None or row.expires_at <= now():
+        row = s.execute(select(WebSession, User).outerjoin(User, User.id == WebSession.user_id)
+                        .where(WebSession.id_hash == hash_token(cookie))).first()
+    if row is None or row[0].expires_at <= now():
         raise Unauthorized("session expired; sign in again")
-    if row.id is None or not row.active:
+    session, user = row
+    if user is None or not user.active:
         raise Unauthorized("account disabled")
-    if method not in SAFE_METHODS and not (csrf and hmac.compare_digest(csrf, row.csrf)):
+    if method not in SAFE_METHODS and not (csrf and hmac.compare_digest(csrf, session.csrf)):
         raise Forbidden("missing or wrong CSRF token (X-CSRF-Token)")
-    return Principal(fastread.user_from(row), row.csrf)
+    return Principal(user, session.csrf)

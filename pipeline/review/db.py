@@ -1,22 +1,23 @@
-"""The review queue's database: tables and the engine factory.
+"""The review queue's database: tables, the engine factory and the two kinds of session.
 
-Inputs: a SQLAlchemy URL (default: SQLite at `<run>/stage3/review.sqlite`).
-Outputs: an Engine whose tables exist.
+Inputs: a SQLAlchemy URL (default: SQLite at `<run>/stage3/review.sqlite`; a team's
+PostgreSQL as `postgresql+psycopg://user@host/db`).
+Outputs: an Engine whose schema is at the newest migration (`migrations/`: an older
+database is upgraded in place, the same way on both backends).
 Invariants (enforced by the database, not only by code):
 - one review per reviewer per item (`uq_review_item_reviewer`);
 - one adjudication per item (`adjudications.item_id` unique);
 - one item per (episode key, revision) (`uq_item_key_revision`);
-- the audit log is append-only on SQLite (triggers abort UPDATE and DELETE on `events`).
-SQLite runs in WAL mode with a busy timeout; write transactions start with
-BEGIN IMMEDIATE (use `write_session`) so two writers queue instead of failing on a
-lock upgrade. Times are UNIX seconds (float).
+- the audit log is append-only (triggers abort UPDATE and DELETE on `events`).
+SQLite runs in WAL mode with a busy timeout; its write transactions start with BEGIN
+IMMEDIATE (use `write_session`) so two writers queue instead of failing on a lock upgrade.
+PostgreSQL runs READ COMMITTED: the workflow takes the item's row lock (`FOR UPDATE`)
+before it checks and changes an item. Times are UNIX seconds (float).
 """
 
 from __future__ import annotations
 
-import fcntl
 import os
-import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -39,13 +40,8 @@ from sqlalchemy.engine import Engine
 from sqlalchemy.orm import DeclarativeBase, Mapped, Session, mapped_column
 
 from pipeline.layout import RunLayout
+from pipeline.vocab import ItemStatus
 
-# item states; "agreed" is passed through on the way to final (recorded as resolution)
-PENDING, LEASED, REVIEWED, CONFLICT, ADJUDICATING, FINAL, SUPERSEDED = (
-    "pending", "leased", "reviewed", "conflict", "adjudicating", "final", "superseded",
-)
-COLLECTING = (PENDING, LEASED, REVIEWED)
-STATUSES = (PENDING, LEASED, REVIEWED, CONFLICT, ADJUDICATING, FINAL, SUPERSEDED)
 
 
 def now() -> float:
@@ -84,7 +80,7 @@ class Item(Base):
     task: Mapped[str] = mapped_column(String(200))
     episode_id: Mapped[str] = mapped_column(String(100))
     instruction: Mapped[str] = mapped_column(Text)
-    status: Mapped[str] = mapped_column(String(16), default=PENDING, index=True)
+    status: Mapped[str] = mapped_column(String(16), default=ItemStatus.pending, index=True)  # ItemStatus
     version: Mapped[int] = mapped_column(Integer, default=1)
     required_reviews: Mapped[int] = mapped_column(Integer)
     n_reviews: Mapped[int] = mapped_column(Integer, default=0)
@@ -158,42 +154,27 @@ class Event(Base):
     detail: Mapped[str] = mapped_column(Text, default="")
 
 
-_APPEND_ONLY = [
-    "CREATE TRIGGER IF NOT EXISTS events_no_update BEFORE UPDATE ON events "
-    "BEGIN SELECT RAISE(ABORT, 'the audit log is append-only'); END",
-    "CREATE TRIGGER IF NOT EXISTS events_no_delete BEFORE DELETE ON events "
-    "BEGIN SELECT RAISE(ABORT, 'the audit log is append-only'); END",
-]
-
-
-# the queue's order over the open items only: fastwrite's candidate search walks it and stops
-# after a few items (without it, every open item was sorted for every `queue/next`)
-OPEN_QUEUE_INDEX = (
-    "CREATE INDEX IF NOT EXISTS ix_items_open_queue ON items (quarantined, n_reviews DESC, id) "
-    f"WHERE status IN ({', '.join(repr(s) for s in COLLECTING)})"
-)
-
-
 def default_url(run_dir: str | Path) -> str:
     return f"sqlite:///{RunLayout(Path(run_dir).resolve()).stage3.review_db}"
 
 
 def make_engine(url: str, busy_timeout_ms: int = 10_000) -> Engine:
-    """An engine with the tables created; SQLite gets WAL, busy timeout and IMMEDIATE writes."""
+    """An engine whose schema is migrated to the newest revision; SQLite gets WAL, busy
+    timeout, IMMEDIATE writes and a private (0600) file."""
     sqlite = url.startswith("sqlite")
     if sqlite and ":memory:" not in url and url.count("/") >= 3:
         path = Path(url.split("///", 1)[1].split("?", 1)[0])
         path.parent.mkdir(parents=True, exist_ok=True)
         _private_files(path)
     kwargs: dict = {"pool_size": 32, "max_overflow": 16} if not sqlite or ":memory:" not in url else {}
+    if not sqlite:
+        kwargs["pool_pre_ping"] = True  # a team's server restarts; a dead pooled connection is replaced
     engine = create_engine(url, connect_args={"timeout": busy_timeout_ms / 1000} if sqlite else {}, **kwargs)
     if sqlite:
         _sqlite_setup(engine, busy_timeout_ms)
-    Base.metadata.create_all(engine)
-    if sqlite:
-        with engine.begin() as conn:
-            for stmt in [*_APPEND_ONLY, OPEN_QUEUE_INDEX]:
-                conn.exec_driver_sql(stmt)
+    from pipeline.review.migrations import upgrade
+
+    upgrade(engine)
     return engine
 
 
@@ -235,87 +216,20 @@ def read_session(engine: Engine) -> Iterator[Session]:
         yield s
 
 
-class _WriterLock:
-    """Writers of one SQLite file queue here: a thread lock within the process, then an
-    exclusive flock on `<db>.lock` across processes (`recover review serve --workers N`).
-
-    SQLite's own busy handler polls with sleeps of up to 100 ms, which under many concurrent
-    writers turns a 5 ms write into a 1 s tail; these locks hand over at once. The busy
-    timeout still guards writers that do not take them (other tools)."""
-
-    def __init__(self, path: Path | None):
-        self.thread = threading.Lock()
-        self.path = path
-        self.fd: int | None = None
-
-    def __enter__(self) -> None:
-        self.thread.acquire()
-        try:
-            if self.path is not None:
-                if self.fd is None:
-                    self.fd = os.open(self.path, os.O_CREAT | os.O_RDWR, 0o600)
-                fcntl.flock(self.fd, fcntl.LOCK_EX)
-        except BaseException:
-            self.thread.release()
-            raise
-
-    def try_enter(self) -> bool:
-        """Take the lock only if nobody holds it; False (nothing taken) if someone does."""
-        if not self.thread.acquire(blocking=False):
-            return False
-        try:
-            if self.path is not None:
-                if self.fd is None:
-                    self.fd = os.open(self.path, os.O_CREAT | os.O_RDWR, 0o600)
-                fcntl.flock(self.fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            self.thread.release()
-            return False
-        except BaseException:
-            self.thread.release()
-            raise
-        return True
-
-    def __exit__(self, *exc) -> None:
-        try:
-            if self.fd is not None:
-                fcntl.flock(self.fd, fcntl.LOCK_UN)
-        finally:
-            self.thread.release()
-
-
-_WRITE_LOCKS: dict[tuple[int, str], _WriterLock] = {}
-_WRITE_LOCKS_GUARD = threading.Lock()
-
-
-def writer_lock(engine: Engine) -> _WriterLock | None:
-    """The lock every writer of this engine's SQLite file takes (None for other databases)."""
-    if engine.dialect.name != "sqlite":
-        return None
-    with _WRITE_LOCKS_GUARD:
-        key = (id(engine), str(engine.url))  # the URL too: an id may be reused by a later engine
-        lock = _WRITE_LOCKS.get(key)
-        if lock is None:
-            db = engine.url.database
-            path = Path(db).with_name(Path(db).name + ".lock") if db and db != ":memory:" else None
-            lock = _WRITE_LOCKS[key] = _WriterLock(path)
-        return lock
+def writer(engine: Engine) -> Session:
+    """A session whose transactions are writes (BEGIN IMMEDIATE on SQLite, taken at the first
+    statement): use `with s.begin():` around the work, in one thread, so that the write lock
+    is held only while the work runs."""
+    return Session(engine.execution_options(write=True), expire_on_commit=False)
 
 
 @contextmanager
 def write_session(engine: Engine) -> Iterator[Session]:
-    """One write transaction (BEGIN IMMEDIATE): committed on success, rolled back on any
-    exception; on SQLite taken under the file's writer lock (`_WriterLock`)."""
-    lock = writer_lock(engine)
-    if lock is not None:
-        lock.__enter__()
-    try:
-        with Session(engine.execution_options(write=True), expire_on_commit=False) as s:
-            with s.begin():
-                yield s
-    finally:
-        if lock is not None:
-            lock.__exit__(None, None, None)
+    """One write transaction (BEGIN IMMEDIATE on SQLite): committed on success, rolled back
+    on any exception."""
+    with writer(engine) as s:
+        with s.begin():
+            yield s
 
 
 def ping(engine: Engine) -> None:

@@ -20,8 +20,9 @@ from sqlalchemy.orm import Session
 
 from pipeline.layout import parse_key
 from pipeline.review import audit
-from pipeline.review.db import FINAL, PENDING, SUPERSEDED, Item, Lease
+from pipeline.review.db import Item, Lease
 from pipeline.review.proposal import Proposal, ReviewContext, checked
+from pipeline.vocab import ItemStatus
 
 
 def proposal_hash(proposal: dict, quarantined: bool, reason: str | None) -> str:
@@ -51,21 +52,21 @@ def enqueue(
         return latest, False
     item = Item(
         key=key, revision=(latest.revision + 1) if latest else 1, suite=suite, task=task, episode_id=ep,
-        instruction=instruction, status=PENDING, version=1, required_reviews=required_reviews, n_reviews=0,
+        instruction=instruction, status=ItemStatus.pending, version=1, required_reviews=required_reviews, n_reviews=0,
         quarantined=quarantined, quarantine_reason=reason, quarantine_detail=detail,
         proposal=proposal, proposal_hash=h, context=context,
     )
     s.add(item)
     s.flush()
     if latest is None:
-        audit.record(s, actor, "enqueued", item, None, {"status": PENDING, "proposal": proposal})
+        audit.record(s, actor, "enqueued", item, None, {"status": ItemStatus.pending, "proposal": proposal})
         return item, True
-    if latest.status != FINAL:  # a final item is never written again
+    if latest.status != ItemStatus.final:  # a final item is never written again
         latest.superseded_by = item.id
         # reviews of an outdated proposal are kept (history) but the item leaves the queue
         s.execute(delete(Lease).where(Lease.item_id == latest.id))
-        audit.record(s, actor, "status", latest, {"status": latest.status}, {"status": SUPERSEDED})
-        latest.status = SUPERSEDED
+        audit.record(s, actor, "status", latest, {"status": latest.status}, {"status": ItemStatus.superseded})
+        latest.status = ItemStatus.superseded
         latest.version += 1
     audit.record(s, actor, "revision", item, {"revision": latest.revision, "proposal": latest.proposal},
                  {"revision": item.revision, "proposal": proposal})

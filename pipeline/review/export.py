@@ -29,8 +29,8 @@ from pipeline.layout import Stage3Layout
 from pipeline.records import Annotation, AnnotationAdjudication, AnnotationProposal, AnnotationReview, Category, Level
 from pipeline.review import truth_view
 from pipeline.review.audit import iso
-from pipeline.review.db import FINAL, Adjudication, Item, Review, User
-from pipeline.vocab import Resolution
+from pipeline.review.db import Adjudication, Item, Review, User
+from pipeline.vocab import ItemStatus, Resolution
 
 class AnnotationRow(BaseModel):
     """One row of `annotations.parquet`: the headline values of an Annotation, flat."""
@@ -88,7 +88,7 @@ def annotation(s: Session, item: Item) -> Annotation:
 def final_items(s: Session) -> list[Item]:
     """Per episode key, the newest final revision, unless the adjudicator excluded it."""
     newest: dict[str, Item] = {}
-    for item in s.scalars(select(Item).where(Item.status == FINAL).order_by(Item.key, Item.revision)):
+    for item in s.scalars(select(Item).where(Item.status == ItemStatus.final).order_by(Item.key, Item.revision)):
         newest[item.key] = item
     return [i for i in newest.values() if i.resolution != Resolution.excluded and i.final]
 

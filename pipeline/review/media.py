@@ -3,20 +3,44 @@
 Inputs: the run folder and a path relative to it (as stored in an item's context).
 Outputs: a resolved path inside the run folder, or None; evidence and frame tables as
 JSON-ready columns.
-Invariants: nothing outside the run's stage1/ and stage2/ folders is ever served, whatever
-the request says (`..`, absolute paths, symlinks pointing out, NUL bytes, the exported
-labels under stage3/): `safe_path` returns None and the API answers 404. Tables are cached by (path, mtime, size), so a rewritten file is reread.
+Invariants: `/media/` serves only the videos items show (`VideoAllowlist`), and nothing
+outside the run's stage1/ and stage2/ folders is ever read, whatever the request says (`..`,
+absolute paths, symlinks pointing out, NUL bytes, the exported labels under stage3/):
+`safe_path` returns None and the API answers 404. Tables are cached by (path, mtime, size), so a rewritten file is reread.
 """
 
 from __future__ import annotations
 
 import os
+import threading
+import time
 from functools import lru_cache
 from pathlib import Path
 
 from pipeline.layout import RunLayout
 
 ALLOWED_SUFFIXES = {".mp4", ".webm", ".parquet", ".png", ".jpg", ".json"}
+RELOAD_S = 2.0
+
+
+class VideoAllowlist:
+    """What `/media/` may serve: the videos the page shows, i.e. the paths in some item's
+    `context.videos`, never a folder (a run's stage1/ also holds the generator's truth and
+    the logged steps). `load` reads those paths from the database; it runs again when a
+    path is not known yet (new items), at most every RELOAD_S seconds."""
+
+    def __init__(self):
+        self.paths: frozenset[str] = frozenset()
+        self.loaded = float("-inf")
+        self.lock = threading.Lock()
+
+    def allows(self, rel: str, load) -> bool:
+        if rel in self.paths:
+            return True
+        with self.lock:
+            if time.monotonic() - self.loaded >= RELOAD_S:
+                self.paths, self.loaded = frozenset(load()), time.monotonic()
+        return rel in self.paths
 
 
 def _allowed(root: Path) -> tuple[Path, Path]:
@@ -44,23 +68,14 @@ def safe_path(run_dir: Path, rel: str) -> Path | None:
 _EVIDENCE_COLUMNS = ("step", "time_s", "gripper_opening", "grasped", "contacts", "displacement", "goal_progress")
 
 
-def _stamp(path: Path) -> tuple[str, int, int]:
+def stamp(path: Path) -> tuple[str, int, int]:
     st = os.stat(path)
     return str(path), st.st_mtime_ns, st.st_size
 
 
 def evidence(path: Path) -> dict:
     """The EVIDENCE_SCHEMA table as columns; displacement becomes one series per object."""
-    return _evidence(*_stamp(path))
-
-
-def evidence_json(path: Path) -> bytes:
-    """`evidence` encoded once (encoding thousands of floats per request costs more than reading)."""
-    return table_json("evidence", path)
-
-
-def frames_json(path: Path) -> bytes:
-    return table_json("frames", path)
+    return _evidence(*stamp(path))
 
 
 _ENCODED: dict[tuple, bytes] = {}  # (kind, path, mtime, size) -> the encoded table
@@ -71,7 +86,7 @@ def table_json(kind: str, path: Path) -> bytes:
     """The `kind` ("evidence" or "frames") table of `path`, encoded (cached by file stamp)."""
     import json
 
-    key = (kind, *_stamp(path))
+    key = (kind, *stamp(path))
     body = _ENCODED.get(key)
     if body is None:
         table = _evidence(*key[1:]) if kind == "evidence" else _frames(*key[1:])
@@ -80,11 +95,6 @@ def table_json(kind: str, path: Path) -> bytes:
             _ENCODED.clear()
         _ENCODED[key] = body
     return body
-
-
-def cached_table_json(kind: str, path: Path) -> bytes | None:
-    """`table_json` if it is cached (no file is read: safe to call in the event loop), else None."""
-    return _ENCODED.get((kind, *_stamp(path)))
 
 
 @lru_cache(maxsize=256)
@@ -118,7 +128,7 @@ def _evidence(path: str, _mtime: int, _size: int) -> dict:
 
 def frames(path: Path) -> dict:
     """The FRAME_SCHEMA table as columns (frame i shows the state at `time_s[i]`)."""
-    return _frames(*_stamp(path))
+    return _frames(*stamp(path))
 
 
 @lru_cache(maxsize=256)

@@ -17,8 +17,9 @@ from sqlalchemy import select
 from sqlalchemy.orm import Session
 
 from pipeline.review import stats
-from pipeline.review.db import FINAL, SUPERSEDED, Item, Review
+from pipeline.review.db import Item, Review
 from pipeline.review.fields import CATEGORIES, LEVELS, same_action
+from pipeline.vocab import ItemStatus
 
 
 def _version(p: dict | None) -> str:
@@ -83,19 +84,19 @@ def _model_quality(items: list[Item], tau: float) -> dict:
 
 def current_items(s: Session) -> list[Item]:
     """Every item that is not a superseded revision."""
-    return list(s.scalars(select(Item).where(Item.status != SUPERSEDED).order_by(Item.id)))
+    return list(s.scalars(select(Item).where(Item.status != ItemStatus.superseded).order_by(Item.id)))
 
 
 def summary(s: Session, tau: float) -> dict:
     units: dict[int, list[dict]] = defaultdict(list)
     rows = s.execute(
         select(Review.item_id, Review.values).join(Item, Item.id == Review.item_id)
-        .where(Item.status != SUPERSEDED, Review.values.is_not(None)).order_by(Review.id)
+        .where(Item.status != ItemStatus.superseded, Review.values.is_not(None)).order_by(Review.id)
     ).all()
     for item_id, values in rows:
         if values:
             units[item_id].append(values)
-    finals = s.scalars(select(Item).where(Item.status == FINAL, Item.final.is_not(None))).all()
+    finals = s.scalars(select(Item).where(Item.status == ItemStatus.final, Item.final.is_not(None))).all()
     return {"agreement": _agreement(units, tau), "model_vs_final": _model_quality(list(finals), tau)}
 
 

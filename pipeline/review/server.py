@@ -54,14 +54,15 @@ def app_from_env():
 
 def serve(config_path: Path, cfg: Config, host: str, port: int, workers: int = 1, docs: bool = False) -> None:
     """Serve until interrupted. Several processes share the port (uvicorn's supervisor) and
-    the SQLite file; their writes queue on the database's write lock file (db.write_session),
-    so decisions are neither lost nor double-counted whichever process takes them."""
+    the database; each write is one transaction of the service layer (SQLite's write lock, or
+    the item's row lock on PostgreSQL), so decisions are neither lost nor double-counted
+    whichever process takes them."""
     import uvicorn
 
     if workers <= 1:
         uvicorn.run(build_app(cfg, docs=docs), host=host, port=port, log_level="info")
         return
-    engine_for(cfg).dispose()  # create the tables once, before the workers race to
+    engine_for(cfg).dispose()  # migrate the schema once, before the workers start
     os.environ[CONFIG_ENV], os.environ[DOCS_ENV] = str(Path(config_path).resolve()), "1" if docs else "0"
     uvicorn.run("pipeline.review.server:app_from_env", factory=True, host=host, port=port, workers=workers,
                 log_level="warning", access_log=False)

@@ -9,6 +9,8 @@ from __future__ import annotations
 from rich.console import Console
 from rich.table import Table
 
+from pipeline.vocab import ItemStatus
+
 
 def _f(x) -> str:
     return "—" if x is None else f"{x:.3f}"
@@ -20,7 +22,7 @@ def render(out: dict, console: Console | None = None) -> None:
     t = Table(title=f"review queue: {counts['total']} items ({counts['quarantined']} quarantined)")
     t.add_column("status")
     t.add_column("items", justify="right")
-    for status in ("pending", "leased", "reviewed", "conflict", "adjudicating", "final", "superseded"):
+    for status in ItemStatus:
         if counts["by_status"].get(status):
             t.add_row(status, str(counts["by_status"][status]))
     console.print(t)

@@ -9,13 +9,17 @@ did not review the item, shows every reviewer's values beside the model's, per f
 
 from __future__ import annotations
 
+import threading
+from collections import OrderedDict
+
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session, defer
 
 from pipeline.review.audit import iso
-from pipeline.review.db import ADJUDICATING, COLLECTING, CONFLICT, Item, Lease, Review, User, now
+from pipeline.review.db import Item, Lease, Review, User, now
 from pipeline.review.fields import CATEGORIES, FIELDS, LEVELS, agreement, grid_time, snap_step
 from pipeline.stage3.inputs import CAMERAS
+from pipeline.vocab import COLLECTING, ItemStatus
 
 
 def _media(ctx: dict) -> dict:
@@ -52,7 +56,29 @@ def _proposal_step(item: Item) -> dict | None:
     return {"fail_step": step, "fail_time_s": grid_time(step, hz)}
 
 
+_BASE: OrderedDict[tuple, dict] = OrderedDict()  # (id, key, revision, created_at) -> _base(item)
+_BASE_MAX = 4096
+_BASE_GUARD = threading.Lock()
+
+
 def _base(item: Item) -> dict:
+    """What never changes about an item (a new proposal is a new item), built once per
+    (item, revision) and process: the same dict for every reviewer (read only)."""
+    key = (item.id, item.key, item.revision, item.created_at)  # the creation time: another database's item 1 differs
+    with _BASE_GUARD:
+        out = _BASE.get(key)
+        if out is not None:
+            _BASE.move_to_end(key)
+            return out
+    out = _build_base(item)
+    with _BASE_GUARD:
+        _BASE[key] = out
+        while len(_BASE) > _BASE_MAX:
+            _BASE.popitem(last=False)
+    return out
+
+
+def _build_base(item: Item) -> dict:
     return {
         "id": item.id,
         "key": item.key,
@@ -75,7 +101,7 @@ def reviewer_view(s: Session, item: Item, user: User) -> dict:
     mine = s.scalar(select(Review).where(Review.item_id == item.id, Review.reviewer_id == user.id))
     lease = s.scalar(select(Lease).where(Lease.item_id == item.id, Lease.user_id == user.id))
     t = now()
-    out = _base(item)
+    out = {**_base(item)}
     out["state"] = "open" if item.status in COLLECTING else "closed"
     out["lease_expires_at"] = iso(lease.expires_at) if lease is not None and lease.expires_at > t else None
     out["my_review"] = None if mine is None else {
@@ -91,7 +117,7 @@ def adjudication_view(s: Session, item: Item) -> dict:
         select(Review, User.name).join(User, User.id == Review.reviewer_id)
         .where(Review.item_id == item.id).order_by(Review.id)
     ).all()
-    out = _base(item)
+    out = {**_base(item)}
     adjudicator = s.get(User, item.adjudicator_id) if item.adjudicator_id else None
     out.update({
         "status": item.status,
@@ -150,11 +176,11 @@ def queue(s: Session, user: User, can_adjudicate: bool, limit: int = 200) -> dic
     }
     if can_adjudicate:
         conflicts = s.scalars(
-            select(Item).options(*_LIST_ONLY).where(Item.status.in_((CONFLICT, ADJUDICATING)), Item.id.not_in(mine)).order_by(Item.id)
+            select(Item).options(*_LIST_ONLY).where(Item.status.in_((ItemStatus.conflict, ItemStatus.adjudicating)), Item.id.not_in(mine)).order_by(Item.id)
         ).all()
         out["conflicts"] = [
             {**_row(i), "disputed": i.disputed or [], "status": i.status,
-             "claimed_by_other": i.status == ADJUDICATING and i.adjudicator_id != user.id
+             "claimed_by_other": i.status == ItemStatus.adjudicating and i.adjudicator_id != user.id
              and (i.adjudication_lease_until or 0) > t}
             for i in conflicts
         ]
@@ -247,6 +273,11 @@ def progress(s: Session, user: User, tolerance_s: float, control_hz: int = 20) -
         "agreement": {"closed_items": len(closed), "pairs": pairs, "all_fields": share(whole),
                       "by_field": {f: share(n) for f, n in per_field.items()}},
     }
+
+
+def video_paths(s: Session) -> set[str]:
+    """Every video an item shows (its `context.videos`): all that `/media/` may serve."""
+    return {p for ctx in s.scalars(select(Item.context)) for p in ((ctx or {}).get("videos") or {}).values() if p}
 
 
 def counts(s: Session) -> dict:

@@ -25,23 +25,10 @@ from sqlalchemy.engine import Engine
 from sqlalchemy.orm import Session
 
 from pipeline.review import audit
-from pipeline.review.db import (
-    COLLECTING,
-    CONFLICT,
-    FINAL,
-    LEASED,
-    PENDING,
-    REVIEWED,
-    Event,
-    Item,
-    Lease,
-    Review,
-    User,
-    now,
-)
-from pipeline.review.errors import Invalid, NotFound, Stale
+from pipeline.review.db import Event, Item, Lease, Review, User, now
+from pipeline.review.errors import Forbidden, Invalid, NotFound, Stale
 from pipeline.review.fields import FieldError, agreement, edited_fields, resolve
-from pipeline.vocab import Decision, Resolution
+from pipeline.vocab import COLLECTING, Decision, ItemStatus, Resolution
 
 DECISIONS = tuple(d.value for d in Decision)
 
@@ -54,8 +41,10 @@ class QueueSettings:
     control_hz: int = 20
 
 
-def get_item(s: Session, item_id: int) -> Item:
-    item = s.get(Item, item_id)
+def get_item(s: Session, item_id: int, lock: bool = False) -> Item:
+    """The item (404 if none); `lock`: with its row lock (FOR UPDATE on PostgreSQL, where two
+    transactions may otherwise check the same item at once; SQLite's writer is alone anyway)."""
+    item = s.get(Item, item_id, with_for_update=True if lock else None)
     if item is None:
         raise NotFound(f"no item {item_id}")
     return item
@@ -73,22 +62,30 @@ def refresh_status(s: Session, item: Item, t: float | None = None) -> None:
     if item.status not in COLLECTING:
         return
     t = now() if t is None else t
-    item.status = REVIEWED if item.n_reviews else (LEASED if _active_leases(s, item.id, t) else PENDING)
+    item.status = ItemStatus.reviewed if item.n_reviews else (ItemStatus.leased if _active_leases(s, item.id, t) else ItemStatus.pending)
 
 
 def expire(s: Session, t: float | None = None) -> int:
     """Drop expired leases and adjudication claims; return how many were dropped."""
     t = now() if t is None else t
-    ids = s.scalars(select(Lease.item_id).where(Lease.expires_at <= t)).all()
-    if ids:
-        s.execute(delete(Lease).where(Lease.expires_at <= t))
-        for item in s.scalars(select(Item).where(Item.id.in_(set(ids)))):
+    # the items first, in id order (row locks on PostgreSQL; a writer holding one item never
+    # waits for another, so this order cannot deadlock), then their leases
+    stale = s.scalars(
+        select(Item).where(Item.id.in_(select(Lease.item_id).where(Lease.expires_at <= t))
+                           | ((Item.status == ItemStatus.adjudicating) & (Item.adjudication_lease_until <= t)))
+        .order_by(Item.id).with_for_update()
+    ).all()
+    if not stale:
+        return 0
+    dropped = s.execute(delete(Lease).where(Lease.expires_at <= t, Lease.item_id.in_([i.id for i in stale]))).rowcount
+    for item in stale:
+        if item.status == ItemStatus.adjudicating and (item.adjudication_lease_until or 0) <= t:
+            item.status, item.adjudicator_id, item.adjudication_lease_until = ItemStatus.conflict, None, None
+            item.version += 1
+            dropped += 1
+        else:
             refresh_status(s, item, t)
-    claims = s.scalars(select(Item).where(Item.status == "adjudicating", Item.adjudication_lease_until <= t)).all()
-    for item in claims:
-        item.status, item.adjudicator_id, item.adjudication_lease_until = CONFLICT, None, None
-        item.version += 1
-    return len(ids) + len(claims)
+    return dropped
 
 
 def _reviewed_by(user_id: int):
@@ -109,6 +106,23 @@ def note_reviews_read(s: Session, user: User, item: Item) -> None:
                                            Event.item_key == item.key).limit(1))
     if seen is None:
         audit.record(s, user.name, READ_REVIEWS, item)
+
+
+def open_reviews(s: Session, user: User, item_id: int, whole_episode: bool = False, admin: bool = False) -> Item:
+    """The item whose reviews `user` is about to read (adjudication view, history), after the
+    blindness rules: nobody reads an item's reviews while they are being collected (with
+    `whole_episode`, while any revision of its episode is), nobody but an admin reading a
+    whole episode reads the others' decisions on an item they reviewed, and whoever reads
+    them is recorded so that they can no longer review that episode."""
+    item = get_item(s, item_id)
+    if item.status in COLLECTING or (whole_episode and s.scalar(
+            select(Item.id).where(Item.key == item.key, Item.status.in_(COLLECTING)).limit(1))):
+        raise Forbidden(f"item {item_id}: reviews are still being collected; they stay hidden until then")
+    if not (admin and whole_episode):
+        if s.scalar(select(Review.id).where(Review.item_id == item_id, Review.reviewer_id == user.id)):
+            raise Forbidden(f"you reviewed item {item_id}; its other decisions stay hidden from you")
+    note_reviews_read(s, user, item)
+    return item
 
 
 def _refuse_if_read(s: Session, user: User, item: Item) -> None:
@@ -139,6 +153,7 @@ def lease_item(s: Session, user: User, item: Item, cfg: QueueSettings) -> Lease:
 
 _last_sweep: dict[str, float] = {}  # database URL -> time of the last sweep
 SWEEP_EVERY_S = 5.0
+QUEUE_PAGE = 64  # open items lease_next examines at a time
 
 
 def _sweep_key(s: Session | Engine) -> str:
@@ -149,33 +164,68 @@ def sweep_due(s: Session | Engine, t: float) -> bool:
     return t - _last_sweep.get(_sweep_key(s), 0.0) >= SWEEP_EVERY_S
 
 
-def lease_next(s: Session, user: User, cfg: QueueSettings) -> Item | None:
-    """The user's next item: one they already hold, else the fullest open item with room."""
+def lease_next(s: Session, user: User, cfg: QueueSettings, tries: int = 8) -> Item | None:
+    """The user's next item: one they already hold, else the fullest open item with room.
+
+    The candidate is taken with `FOR UPDATE SKIP LOCKED` (PostgreSQL: concurrent callers
+    pass over each other's candidates instead of queueing on them; SQLite ignores it, its
+    writer is alone). `lease_item` then re-checks the room under the row lock; an item
+    filled meanwhile is passed over for the next."""
     t = now()
     # every query below already ignores expired leases; the sweep only tidies rows and
     # statuses, so it need not run on every request
     if sweep_due(s, t):
         expire(s, t)
         _last_sweep[_sweep_key(s)] = t
+    # the items the user holds, found from their leases (a handful), not by walking the items
+    mine = s.scalars(select(Lease.item_id).where(Lease.user_id == user.id, Lease.expires_at > t)).all()
     held = s.scalar(
-        select(Item).join(Lease, Lease.item_id == Item.id)
-        .where(Lease.user_id == user.id, Lease.expires_at > t, Item.status.in_(COLLECTING), ~_reviewed_by(user.id),
-               ~_read_reviews_of(user))
-        .order_by(Item.id).limit(1)
-    )
+        select(Item).where(Item.id.in_(mine), Item.status.in_(COLLECTING), ~_reviewed_by(user.id),
+                           ~_read_reviews_of(user))
+        .order_by(Item.id).limit(1).with_for_update(of=Item)
+    ) if mine else None
     if held is not None:
         lease_item(s, user, held, cfg)
         return held
     leases = select(func.count(Lease.id)).where(Lease.item_id == Item.id, Lease.expires_at > t).scalar_subquery()
-    item = s.scalar(
-        select(Item)
-        .where(Item.status.in_(COLLECTING), Item.n_reviews + leases < Item.required_reviews, ~_reviewed_by(user.id),
-               ~_read_reviews_of(user))
-        .order_by(Item.quarantined, Item.n_reviews.desc(), Item.id).limit(1)
-    )
-    if item is not None:
-        lease_item(s, user, item, cfg)
-    return item
+    passed: list[int] = []
+    order = (Item.quarantined, Item.n_reviews.desc(), Item.id)
+    # the open items in queue order, a page at a time: the conditions below (correlated
+    # subqueries) then run on a page, not on every open item of a long queue
+    for page in range(10_000):
+        ids = s.scalars(select(Item.id).where(Item.status.in_(COLLECTING)).order_by(*order)
+                        .limit(QUEUE_PAGE).offset(page * QUEUE_PAGE)).all()
+        if not ids:
+            return None
+        while len(passed) < tries:
+            item = s.scalar(
+                select(Item)
+                .where(Item.id.in_(ids), Item.status.in_(COLLECTING), Item.n_reviews + leases < Item.required_reviews,
+                       ~_reviewed_by(user.id), ~_read_reviews_of(user), Item.id.not_in(passed))
+                .order_by(*order).limit(1).with_for_update(skip_locked=True, of=Item)
+            )
+            if item is None:
+                break  # nothing open to this user on this page: the next page
+            try:
+                lease_item(s, user, item, cfg)  # refuses before it writes anything
+                return item
+            except Stale:
+                passed.append(item.id)
+        if len(passed) >= tries:
+            return None
+    return None
+
+
+KEY_CHARS = 100  # the idempotency_key columns' width
+
+
+def idempotency_key(body: dict) -> str:
+    key = str(body.get("idempotency_key") or "")
+    if not key:
+        raise Invalid("idempotency_key: required (any unique string per decision)", field="idempotency_key")
+    if len(key) > KEY_CHARS:
+        raise Invalid(f"idempotency_key: at most {KEY_CHARS} characters", field="idempotency_key")
+    return key
 
 
 def _values_for(item: Item, decision: str, fields: dict | None, reason: str | None,
@@ -207,10 +257,8 @@ def _same(r: Review, decision: str, values: dict | None, reason: str | None) -> 
 
 def submit_review(s: Session, user: User, item_id: int, body: dict, cfg: QueueSettings) -> tuple[Review, bool]:
     """Store a decision; return (the review, whether it was a harmless repeat)."""
-    item = get_item(s, item_id)
-    decision, key = body.get("decision"), str(body.get("idempotency_key") or "")
-    if not key:
-        raise Invalid("idempotency_key: required (any unique string per decision)", field="idempotency_key")
+    item = get_item(s, item_id, lock=True)
+    decision, key = body.get("decision"), idempotency_key(body)
     mine = s.scalar(select(Review).where(Review.item_id == item.id, Review.reviewer_id == user.id))
     if mine is not None and mine.idempotency_key == key:
         return mine, True
@@ -265,9 +313,9 @@ def close(s: Session, item: Item, cfg: QueueSettings, actor: str) -> None:
     before = item.status
     item.agreed, item.disputed = agreed, disputed
     if disputed:
-        item.status = CONFLICT
+        item.status = ItemStatus.conflict
     else:
-        item.status, item.final, item.resolution, item.finalized_at = FINAL, agreed, Resolution.agreed, now()
+        item.status, item.final, item.resolution, item.finalized_at = ItemStatus.final, agreed, Resolution.agreed, now()
     item.version += 1
     audit.record(s, actor, "status", item, {"status": before},
                  {"status": item.status, "disputed": disputed, "agreed": agreed})

@@ -1,4 +1,9 @@
-"""Fixtures of the review tests: a tiny real run folder, a real SQLite queue, people, a server."""
+"""Fixtures of the review tests: a tiny real run folder, a real queue database, people, a server.
+
+Every test that uses `engine` (or `db_url`) runs twice: on SQLite (the default) and on a real
+PostgreSQL server (`tests/pg_cluster.py`: one throwaway cluster per test process, a fresh
+database per test). What is SQLite-only by nature (the 0600 database file) makes its own
+SQLite engine instead."""
 
 from __future__ import annotations
 
@@ -58,9 +63,28 @@ def settings() -> QueueSettings:
     return QueueSettings(required_reviews=2, time_tolerance_s=0.5, lease_seconds=600)
 
 
+@pytest.fixture(scope="session")
+def pg_cluster():
+    from tests.pg_cluster import PgCluster
+
+    with PgCluster() as pg:
+        yield pg
+
+
+@pytest.fixture(params=["sqlite", "postgresql"])
+def db_url(request, run_dir) -> str:
+    if request.param == "sqlite":
+        yield f"sqlite:///{run_dir / 'stage3' / 'review.sqlite'}"
+        return
+    pg = request.getfixturevalue("pg_cluster")
+    url = pg.new_database()
+    yield url
+    pg.drop_database(url)
+
+
 @pytest.fixture
-def engine(run_dir):
-    eng = make_engine(f"sqlite:///{run_dir / 'stage3' / 'review.sqlite'}")
+def engine(db_url):
+    eng = make_engine(db_url)
     yield eng
     eng.dispose()
 

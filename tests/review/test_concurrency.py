@@ -82,9 +82,11 @@ def test_two_reviewers_pulling_from_the_queue_at_once_share_items_up_to_k(server
 
 
 def test_one_reviewer_sending_two_different_first_decisions_at_once_stores_one(engine, settings, people, items):
-    # both pass the checks made before the writer lock (no review of theirs yet); under the
-    # lock the second finds the first and is answered as a stale edit, never a second review
-    from pipeline.review import fastwrite
+    # each starts with no review of theirs; inside its write transaction (the item's row lock
+    # on PostgreSQL) the later ones find the first and are a repeat or a stale edit, never a
+    # second review
+    from pipeline.review import workflow
+    from pipeline.review.db import write_session
     from pipeline.review.errors import Stale
 
     with read_session(engine) as s:
@@ -97,8 +99,9 @@ def test_one_reviewer_sending_two_different_first_decisions_at_once_stores_one(e
                 "fields": {"recovery_level": f"L{1 + i % 2}"}}
         barrier.wait()
         try:
-            outcomes.append("replayed" if fastwrite.decide(engine, ann, items[0], body, settings)["replayed"]
-                            else "stored")
+            with write_session(engine) as s:
+                _review, replayed = workflow.submit_review(s, ann, items[0], body, settings)
+            outcomes.append("replayed" if replayed else "stored")
         except Stale:
             outcomes.append("stale")
 

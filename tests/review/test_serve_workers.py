@@ -1,4 +1,5 @@
-"""`recover review serve --workers 2`: two server processes on one SQLite file, reviewers racing."""
+"""`recover review serve --workers 2`: two server processes on one database (SQLite file or
+PostgreSQL), reviewers racing."""
 
 from __future__ import annotations
 
@@ -19,9 +20,10 @@ from pipeline.review.server import free_port
 REPO = Path(__file__).resolve().parents[2]
 
 
-def test_two_server_processes_lose_no_decision_and_never_exceed_k(tmp_path, run_dir, engine, people, items):
+def test_two_server_processes_lose_no_decision_and_never_exceed_k(tmp_path, run_dir, db_url, engine, people, items):
     cfg = tmp_path / "c.yaml"
-    cfg.write_text(yaml.safe_dump({"run": {"output_dir": str(run_dir)}, "stage3": {"reviews_per_item": 2}}))
+    stage3 = {"reviews_per_item": 2, **({} if db_url.startswith("sqlite") else {"db_url": db_url})}
+    cfg.write_text(yaml.safe_dump({"run": {"output_dir": str(run_dir)}, "stage3": stage3}))
     port = free_port()
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(REPO), os.environ.get("PYTHONPATH", "")])}
     server = subprocess.Popen([sys.executable, "-c", "from pipeline.cli import app; app()", "review", "serve",

@@ -23,11 +23,17 @@ def item(engine, item_id: int) -> Item:
         return s.get(Item, item_id)
 
 
+def _digest(body: dict) -> str:
+    import hashlib
+
+    return hashlib.sha256(repr(body).encode()).hexdigest()[:16]  # idempotency keys hold 100 characters
+
+
 def decide(engine, who: str, item_id: int, settings, key: str | None = None, version: int = 0, **body):
     body.setdefault("decision", "accept")
     with write_session(engine) as s:
         r, replayed = workflow.submit_review(s, user(engine, who), item_id,
-                                             {"idempotency_key": key or f"{who}-{item_id}-{body}", "version": version,
+                                             {"idempotency_key": key or f"{who}-{item_id}-{_digest(body)}", "version": version,
                                               **body}, settings)
         return r.version, replayed
 
