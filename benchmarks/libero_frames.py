@@ -30,9 +30,11 @@ CAMERAS = ("agentview", "robot0_eye_in_hand")
 
 
 def measure(suite: str, name: str, size: int) -> tuple[dict, list[np.ndarray]]:
-    from libero.libero.envs import OffScreenRenderEnv
-
     from pipeline.sim import SimEnv, get_task
+    from pipeline.sim.libero_setup import ensure_libero_ready
+
+    ensure_libero_ready()  # LIBERO's config first, or its import asks for a folder on stdin
+    from libero.libero.envs import OffScreenRenderEnv
 
     task = get_task(suite, name)
     with SimEnv(task) as env:
