@@ -50,7 +50,7 @@ def render(folder: Path, reps: int) -> dict:
                                      ("v1 standard (collision drawn)", "standard", True)):
         r = render_mod.FrameRenderer(model, 256, quality)
         if collision:
-            r._option.geomgroup[0] = 1
+            r.option.geomgroup[0] = 1
         if out["gl_vendor"] is None:
             from OpenGL import GL
 

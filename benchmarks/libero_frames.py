@@ -50,12 +50,14 @@ def measure(suite: str, name: str, size: int) -> tuple[dict, list[np.ndarray]]:
         env.set_state(state)
         ours = {c: env.render(c, size, "standard") for c in CAMERAS}
         fast = {c: env.render(c, size, "fast") for c in CAMERAS}
-        r = env._renderers[(size, "standard")]
-        r._option.geomgroup[0] = 1  # the renderer before version 2
+        from pipeline.sim.render import FrameRenderer
+
+        r = FrameRenderer(env.env.sim.model._model, size, "standard")
+        r.option.geomgroup[0] = 1  # the renderer before version 2
         try:
-            old = {c: env.render(c, size, "standard") for c in CAMERAS}
+            old = {c: r.render(env.env.sim.data._data, c) for c in CAMERAS}
         finally:
-            r._option.geomgroup[0] = 0
+            r.close()
     row, stats = [], {}
     for c in CAMERAS:
         row += [theirs[c], ours[c], old[c]]

@@ -121,7 +121,7 @@ def child(folder: Path, name: str, opts: dict, reps: int) -> None:
     r = sr.renderer(SIZE, quality)
     r.cull = r.cull and opts.get("cull", True)
     if opts.get("collision"):  # the renderer before version 2
-        r._option.geomgroup[0] = 1
+        r.option.geomgroup[0] = 1
     frames = sr.render_states(states, CAMERAS, SIZE, quality, fields)  # warm
     c0, w0 = time.process_time(), time.perf_counter()
     for _ in range(reps):

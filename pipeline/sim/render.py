@@ -91,7 +91,7 @@ class FrameRenderer:
         samples = model.vis.quality.offsamples
         if self.fast:  # multisampling is fixed when the GL context is made
             model.vis.quality.offsamples = 0
-        self._option = libero_scene_option()
+        self.option = libero_scene_option()  # public: benchmarks set group 0 to redraw renderer v1
         try:
             self._renderer = mujoco.Renderer(model, height=size, width=size, max_geom=LIBERO_MAX_GEOM)
         finally:
@@ -106,13 +106,13 @@ class FrameRenderer:
         """HxWx3 uint8 image of `camera` for the current `data` (call mj_forward first)."""
         outside = self._outside(data, camera) if self.cull else None
         if outside is None or not outside.any():
-            self._renderer.update_scene(data, camera=camera, scene_option=self._option)
+            self._renderer.update_scene(data, camera=camera, scene_option=self.option)
         else:  # hide them for this scene update only (the model may be the physics' own)
             groups = self._model.geom_group
             saved = groups[outside]
             groups[outside] = HIDDEN_GROUP
             try:
-                self._renderer.update_scene(data, camera=camera, scene_option=self._option)
+                self._renderer.update_scene(data, camera=camera, scene_option=self.option)
             finally:
                 groups[outside] = saved
         if self.fast:
