@@ -63,3 +63,18 @@ def test_old_frames_are_refused_then_rerendered_from_states_without_physics(tmp_
     assert np.array_equal(np.load(frames.parent / "states.npy"), states_before)  # no physics ran
     require_current_frames(run_frame_tables(cfg), "the review server")
     assert rerender(cfg) == 0  # a third call finds nothing to do
+
+
+def test_lerobot_export_refuses_to_resume_over_episodes_an_older_renderer_drew(tmp_path):
+    from pipeline.atomic import Completions
+    from pipeline.release.lerobot_export import ExportEpisode, ExportStage, ExportUnit, refuse_old_renders
+
+    ep = ExportEpisode("s/t/e", "libero_spatial", "t", "do it", tmp_path, 3)
+    units = [ExportUnit(i, 3 * i, 0, ep, ("m", "k")) for i in range(2)]
+    stage = ExportStage(str(tmp_path / "rollouts"), str(tmp_path / "_work"), 64, "standard", units)
+    marks = Completions(stage.root)
+    marks.mark_done(stage.marker_id(units[0]), {"inputs": stage.fingerprint(units[0])})  # drawn by this renderer
+    refuse_old_renders(stage, units)
+    marks.mark_done(stage.marker_id(units[1]), {})  # a marker from before renderer versions were recorded
+    with pytest.raises(FatalError, match=r"1 episode\(s\).*older renderer.*recover export-lerobot"):
+        refuse_old_renders(stage, units)
