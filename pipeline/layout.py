@@ -187,6 +187,11 @@ class Stage1Layout:
     def summary(self) -> Path:
         return self.root / SUMMARY
 
+    @property
+    def rerender(self) -> Path:
+        """The root of `recover stage1 --rerender` (its runner's done markers)."""
+        return self.root / "_rerender"
+
     @staticmethod
     def episode_rel(key: str) -> str:
         """An episode folder relative to stage1/ (`EpisodeRecord.path`)."""

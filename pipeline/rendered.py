@@ -44,21 +44,20 @@ def history_stamp() -> dict[str, np.ndarray]:
     return {KEY: np.asarray(RENDERER_VERSION, dtype=np.int32)}
 
 
-def stale_frames(paths) -> list[Path]:
-    """The frame tables among `paths` that the current renderer did not make (missing ones
-    are not stale: nothing was rendered there)."""
-    return [p for p in map(Path, paths) if p.is_file() and frames_version(p) != RENDERER_VERSION]
+def stale_frames(paths) -> dict[Path, int]:
+    """The frame tables among `paths` that the current renderer did not make, with the version
+    that did (missing ones are not stale: nothing was rendered there)."""
+    return {p: v for p in map(Path, paths) if p.is_file() and (v := frames_version(p)) != RENDERER_VERSION}
 
 
 def require_current_frames(paths, who: str, rerender: str = RERENDER) -> None:
     """Raise FatalError, before any work, when any frame table in `paths` is stale."""
     stale = stale_frames(paths)
     if stale:
-        versions = sorted({frames_version(p) for p in stale})
         raise FatalError(
             f"{who} refuses frames of {len(stale)} episode(s) made by renderer version "
-            f"{', '.join(map(str, versions))} (robosuite's collision geometry drawn over LIBERO's meshes; "
-            f"now {RENDERER_VERSION}), e.g. {stale[0]}; re-render them from the logged states with `{rerender}`"
+            f"{', '.join(map(str, sorted(set(stale.values()))))} (robosuite's collision geometry drawn over LIBERO's meshes; "
+            f"now {RENDERER_VERSION}), e.g. {next(iter(stale))}; re-render them from the logged states with `{rerender}`"
         )
 
 

@@ -236,7 +236,7 @@ def refuse_old_renders(stage: ExportStage, units: list[ExportUnit]) -> None:
     training set (markers of those carry no renderer version): refuse, naming the fix."""
     marks = Completions(stage.root)
     old = [u for u in units if marks.is_done(stage.marker_id(u))
-           and ((marks.info(stage.marker_id(u)) or {}).get("inputs") or {}).get("renderer_version") != RENDERER_VERSION]
+           and (marks.info(stage.marker_id(u)) or {}).get("inputs") != stage.fingerprint(u)]
     if old:
         raise FatalError(f"export-lerobot {Path(stage.dataset).name}: {len(old)} episode(s) in {stage.dataset} were "
                          f"rendered by an older renderer (robosuite's collision geometry; now version {RENDERER_VERSION}); "

@@ -14,21 +14,17 @@ what is current is skipped, so a rerun finishes the rest and a third does nothin
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from pipeline.config import Config
-from pipeline.layout import SCENE_PREFIX, EpisodeFiles, RunLayout
+from pipeline.layout import SCENE_GLOB, EpisodeFiles, RunLayout, parse_key, parse_scene_bddl, scene_files
 from pipeline.records import read_episodes
-from pipeline.rendered import history_stamp, history_version, stale_frames
+from pipeline.rendered import KEY, history_version, stale_frames
 from pipeline.runner import Stage, UnitResult, WorkerContext
 from pipeline.sim.render import RENDERER_VERSION
-
-_HISTORY_RE = re.compile(rf"{SCENE_PREFIX}(?P<suite>[^/]+)/(?P<task>[^/]+)/episode_[^/]+/step_\d+_history_frames\.npz$")
-
 
 @dataclass(frozen=True)
 class RerenderUnit:
@@ -36,6 +32,7 @@ class RerenderUnit:
     suite: str
     task: str
     path: str  # the episode folder, or the history-frames archive
+    source: str  # the states it is drawn from: the episode's states.npy, or the scene's `_history.npz`
     cameras: tuple[str, ...] = ()
     fps: int = 0
     size: int = 0
@@ -54,7 +51,7 @@ def video_units(cfg: Config) -> list[RerenderUnit]:
         files = stage1.episode(rec)
         if rec.videos and stale_frames([files.frames]):
             size = _video_size(stage1.video(rec, next(iter(rec.videos))))
-            out.append(RerenderUnit("videos", rec.suite, rec.task, str(files.dir), tuple(rec.videos),
+            out.append(RerenderUnit("videos", rec.suite, rec.task, str(files.dir), str(files.states), tuple(rec.videos),
                                     rec.video_fps or cfg.stage1.video.fps, size or cfg.stage1.video.resolution))
     return out
 
@@ -62,17 +59,19 @@ def video_units(cfg: Config) -> list[RerenderUnit]:
 def history_units(cfg: Config) -> list[RerenderUnit]:
     layout = RunLayout.of(cfg)
     out = []
-    for root in dict.fromkeys((layout.stage2.root, layout.release.root)):
-        for p in sorted(Path(root).rglob("*_history_frames.npz")) if Path(root).is_dir() else []:
-            m = _HISTORY_RE.search(p.as_posix())
-            if m is None:
+    for root in map(Path, dict.fromkeys((layout.stage2.root, layout.release.root))):
+        for bddl in sorted(root.glob(SCENE_GLOB)) if root.is_dir() else []:
+            scene = parse_scene_bddl(bddl.relative_to(root).as_posix())
+            files = scene_files(root, *scene) if scene else None
+            if files is None or not files.history_frames.is_file():
                 continue
-            with np.load(p) as z:
+            with np.load(files.history_frames) as z:
                 if history_version(z) == RENDERER_VERSION:
                     continue
-                cams = tuple(k for k in z.files if k not in ("steps", "renderer_version"))
+                cams = tuple(k for k in z.files if k not in ("steps", KEY))
                 size = int(z[cams[0]].shape[1]) if cams and z[cams[0]].ndim == 4 else 0
-            out.append(RerenderUnit("history", m["suite"], m["task"], str(p), cams, 0, size))
+            suite, task, _ = parse_key(scene[0])
+            out.append(RerenderUnit("history", suite, task, str(files.history_frames), str(files.history), cams, 0, size))
     return out
 
 
@@ -96,7 +95,7 @@ class Rerender(Stage[RerenderUnit]):
 
     @property
     def root(self) -> Path:
-        return RunLayout.of(self.cfg).stage1.root / "_rerender"
+        return RunLayout.of(self.cfg).stage1.rerender
 
     def units(self, cfg=None) -> list[RerenderUnit]:
         return self.planned
@@ -125,13 +124,12 @@ class Rerender(Stage[RerenderUnit]):
         if unit.kind == "videos":
             from pipeline.stage1.video import render_videos
 
-            states = np.load(EpisodeFiles(Path(unit.path)).states)
+            states = np.load(unit.source)
             render_videos(env, states, unit.path, list(unit.cameras), unit.fps, unit.size, self.cfg.stage1.video.quality)
         else:
             from pipeline.stage2.history import render_frames, write_history
 
-            sibling = Path(unit.path.replace("_history_frames.npz", "_history.npz"))
-            with np.load(sibling) as z:
+            with np.load(unit.source) as z:
                 history = {k: z[k] for k in ("steps", "sim_states")}
             write_history(Path(unit.path), render_frames(env, history, list(unit.cameras), unit.size))
         return UnitResult(ok=True)
