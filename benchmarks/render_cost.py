@@ -97,17 +97,10 @@ def libero_frames(task, states: np.ndarray) -> dict[str, np.ndarray]:
 
 def _state_renderer(folder: Path):
     """The stage-1 render process's renderer, from the MJB or, where there is none, the XML."""
-    import mujoco
-
     from pipeline.sim.state_render import StateRenderer
 
-    if (folder / "model.mjb").is_file():
-        return StateRenderer(folder / "model.mjb")
-    sr = StateRenderer.__new__(StateRenderer)
-    sr._mujoco, sr._renderers = mujoco, {}
-    sr.model = mujoco.MjModel.from_xml_path(str(folder / "scene.xml"))
-    sr.data = mujoco.MjData(sr.model)
-    return sr
+    mjb = folder / "model.mjb"
+    return StateRenderer(mjb if mjb.is_file() else folder / "scene.xml")
 
 
 def child(folder: Path, name: str, opts: dict, reps: int) -> None:

@@ -39,10 +39,12 @@ class StateRenderer:
     """Renders flattened states (time, qpos, qvel) of one saved model; reuse across episodes."""
 
     def __init__(self, mjb_path: str | Path):
+        """`mjb_path`: the saved model (MJB), or an MJCF `.xml` (benchmarks/render_cost.py)."""
         import mujoco
 
         self._mujoco = mujoco
-        self.model = mujoco.MjModel.from_binary_path(str(mjb_path))
+        load = mujoco.MjModel.from_xml_path if Path(mjb_path).suffix == ".xml" else mujoco.MjModel.from_binary_path
+        self.model = load(str(mjb_path))
         self.data = mujoco.MjData(self.model)
         self._renderers: dict[tuple[int, str], FrameRenderer] = {}
 
