@@ -159,6 +159,15 @@ def test_the_page_is_served_with_a_strict_content_security_policy(server):
     assert r.status_code == 200 and "js/main.js" in r.text
     csp = r.headers["content-security-policy"]
     assert "default-src 'self'" in csp and "frame-ancestors 'none'" in csp and "unsafe-eval" not in csp
+    assert r.headers["x-content-type-options"] == "nosniff"
+
+
+def test_a_malformed_decision_is_a_422_that_is_not_sniffed(server, people, items):
+    """(was checked on the fast lane's answers; the lane is gone, the headers stay on every answer)"""
+    ann = client(server, people, "ann")
+    r = ann.post(f"/api/items/{items[0]}/review", content=b"{not json", headers={"Content-Type": "application/json"})
+    assert r.status_code == 422 and "detail" in r.json()
+    assert r.headers["x-content-type-options"] == "nosniff"
 
 
 def test_without_a_lease_a_reviewer_cannot_take_a_place_others_hold(server, people, items):
