@@ -198,12 +198,21 @@ def lease_next(s: Session, user: User, cfg: QueueSettings, tries: int = 8) -> It
         if not ids:
             return None
         while len(passed) < tries:
-            item = s.scalar(
+            open_to_user = (
                 select(Item)
                 .where(Item.id.in_(ids), Item.status.in_(COLLECTING), Item.n_reviews + leases < Item.required_reviews,
                        ~_reviewed_by(user.id), ~_read_reviews_of(user), Item.id.not_in(passed))
-                .order_by(*order).limit(1).with_for_update(skip_locked=True, of=Item)
+                .order_by(*order).limit(1)
             )
+            item = s.scalar(open_to_user.with_for_update(skip_locked=True, of=Item))
+            if item is None:
+                # SKIP LOCKED also passes over an item another request is deciding right now
+                # (its row lock): "none" is only sure once such rows are waited for, and asked
+                # again in a snapshot taken after they committed (the waiting statement still
+                # counts, say, a lease its holder has since turned into a review)
+                item = s.scalar(open_to_user.with_for_update(of=Item))
+                if item is None:
+                    item = s.scalar(open_to_user.with_for_update(skip_locked=True, of=Item))
             if item is None:
                 break  # nothing open to this user on this page: the next page
             try:
