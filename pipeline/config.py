@@ -179,6 +179,17 @@ class VideoConfig(_Strict):
         return v
 
 
+class RetryConfig(_Strict):
+    """How a unit that raised `RetryableError` (a VLM server's 429/503, a timeout) is tried
+    again in its worker: up to `tries` attempts in all, waiting `backoff_s`, then twice as
+    long each time, at most `max_backoff_s` (a `retry_after` the error names counts, capped
+    the same); after the last try the unit is set aside with the reason."""
+
+    tries: int = Field(default=3, ge=1)
+    backoff_s: float = Field(default=1.0, ge=0)
+    max_backoff_s: float = Field(default=30.0, ge=0)
+
+
 class ExecutorConfig(_Strict):
     kind: Literal["local", "ray", "inline"] = "local"  # inline: one worker, the calling process
     workers: int = Field(default=2, ge=1)
@@ -186,6 +197,7 @@ class ExecutorConfig(_Strict):
     # times an item is run again after its worker died under it (kill -9, OOM, a lost Ray
     # node) before it is set aside with the reason; the run itself goes on either way
     max_retries: int = Field(default=2, ge=0)
+    retry: RetryConfig = RetryConfig()  # RetryableError raised by a unit (not a dead worker)
 
 
 class Stage1Config(_Strict):

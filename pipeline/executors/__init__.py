@@ -14,16 +14,18 @@ from pipeline.executors.base import Executor, RunReport, SetAside
 
 
 def make_executor(cfg: ExecutorConfig, worker_env: dict[str, str] | None = None) -> Executor:
+    """The configured executor; it carries `cfg.retry` for the runner (RetryableError policy)."""
     if cfg.kind == "ray":
         from pipeline.executors.ray import RayExecutor
 
-        return RayExecutor(cfg.workers, cfg.ray_address, worker_env=worker_env, max_retries=cfg.max_retries)
-    from pipeline.executors.local import InlineExecutor, LocalExecutor
+        ex: Executor = RayExecutor(cfg.workers, cfg.ray_address, worker_env=worker_env, max_retries=cfg.max_retries)
+    else:
+        from pipeline.executors.local import InlineExecutor, LocalExecutor
 
-    if cfg.kind == "inline":
-        return InlineExecutor()
-
-    return LocalExecutor(cfg.workers, worker_env=worker_env, max_retries=cfg.max_retries)
+        ex = InlineExecutor() if cfg.kind == "inline" else \
+            LocalExecutor(cfg.workers, worker_env=worker_env, max_retries=cfg.max_retries)
+    ex.retry = cfg.retry
+    return ex
 
 
 __all__ = ["Executor", "RunReport", "SetAside", "make_executor"]

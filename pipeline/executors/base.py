@@ -79,6 +79,7 @@ def default_label(index: int, _item: Any) -> str:
 class Executor(ABC):
     workers: int
     max_retries: int = 2
+    retry: Any = None  # the config's RetryConfig for the runner (make_executor sets it); never used here
     report: RunReport = RunReport()  # of the last run
 
     @abstractmethod

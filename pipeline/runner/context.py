@@ -15,7 +15,10 @@ from typing import Any
 
 class WorkerContext:
     def __init__(self, emit: Callable[[Any], None] | None = None):
+        from pipeline.config import RetryConfig
+
         self.emit: Callable[[Any], None] = emit or (lambda ev: None)
+        self.retry = RetryConfig()  # the current run's; `run_shard` sets it from the runner's job
         self._envs = None  # EnvCache, built on first use (imports the simulator)
         self._policies: dict[str, Any] = {}
         self._helpers: dict[str, Any] = {}

@@ -7,7 +7,9 @@ hands the shards to the executor, shows one progress bar, and turns a shard whos
 kept dying (the executor's `SetAside`) into one `set_aside` event per unfinished unit.
 Worker: `run_shard` re-checks the markers (a retried shard redoes only unfinished units),
 streams the stage's results, writes each done unit's marker last (with its inputs'
-fingerprint), and emits one `Event` per unit. Every executor relays the same events.
+fingerprint), and emits one `Event` per unit; a unit that raises `RetryableError` is tried
+again in the worker with backoff (retry.py, `executor.retry` in the config), each lost try
+a `retry` event, and set aside after the last. Every executor relays the same events.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
 from pipeline.atomic import Completions
+from pipeline.config import RetryConfig
 from pipeline.executors.base import Executor, RunReport, SetAside
 from pipeline.runner.context import WorkerContext
 from pipeline.runner.events import Event
@@ -40,9 +43,12 @@ def is_current(marks: Completions, stage: Stage, unit: Any) -> bool:
     return info is not None and info.get("inputs", fp) == fp
 
 
-def run_shard(job: tuple[Stage, tuple], ctx: WorkerContext) -> int:
-    """Executor entry point (every executor, every stage): returns the units marked done."""
-    stage, units = job
+def run_shard(job: tuple, ctx: WorkerContext) -> int:
+    """Executor entry point (every executor, every stage): `job` is (stage, units) or (stage,
+    units, RetryConfig); returns the units marked done."""
+    stage, units, *retry = job
+    if retry:
+        ctx.retry = retry[0]
     marks = Completions(stage.root)
     todo = [u for u in units if not is_current(marks, stage, u)]
     ran = 0
@@ -77,9 +83,11 @@ class RunStats(BaseModel):
 
 
 class Runner:
-    def __init__(self, executor: Executor, console: Console | None = None):
+    def __init__(self, executor: Executor, console: Console | None = None, retry: RetryConfig | None = None):
         self.executor = executor
         self.console = console or Console()
+        # RetryableError policy: given here, else the executor's (make_executor takes it from the config)
+        self.retry = retry or getattr(executor, "retry", None) or RetryConfig()
 
     def pending(self, stage: Stage, units: list) -> list:
         """The units still to do; a done unit whose inputs changed is forgotten and redone."""
@@ -127,15 +135,17 @@ class Runner:
                                            + (f": {first[0][:300]}" if first else ""))
                 elif ev.kind == "retry":
                     stats.retried.append(ev)
+                    progress.console.print(f"[yellow]{stage.name}: retry[/yellow] {ev.unit}: attempt {ev.attempt} "
+                                           f"lost ({ev.reason})" + (f"; {ev.detail}" if ev.detail else ""))
                 if on_event is not None:
                     on_event(ev)
 
             shards = stage.shards(todo, self.executor.workers)
-            jobs = [(stage, s) for s in shards]
+            jobs = [(stage, s, self.retry) for s in shards]
             results = self.executor.run(run_shard, jobs, on_event=handle,
                                         label=lambda i, job: stage.shard_label(job[1])) if jobs else []
             marks = Completions(stage.root)
-            for (_, shard), res in zip(jobs, results):
+            for (_, shard, _), res in zip(jobs, results):
                 if isinstance(res, SetAside):  # its workers kept dying: its unfinished units are set aside
                     for u in shard:
                         if not is_current(marks, stage, u):

@@ -4,7 +4,8 @@ A `Stage` says which units a run has (`units(cfg)`), how to process one in a wor
 (`process(unit, ctx)` -> `UnitResult`), where its done markers live (`root`) and, when a
 unit's inputs can change after it is done, what they are (`fingerprint`). The runner
 (runner.py) owns everything around that: skipping done units, writing the marker last,
-retrying shards whose worker died, setting failed units aside, events and the progress bar.
+retrying shards whose worker died and units that raised `RetryableError` (retry.py),
+setting failed units aside, events and the progress bar.
 
 Invariants a stage keeps: `process` writes its outputs atomically (pipeline/atomic.py), so a
 unit run twice (a retry) leaves them once; a stage object pickles (it travels to workers);
@@ -21,8 +22,9 @@ from typing import Any, Generic, TypeVar
 
 from pydantic import BaseModel
 
-from pipeline.errors import FatalError
+from pipeline.errors import FatalError, RetryableError
 from pipeline.runner.context import WorkerContext
+from pipeline.runner.retry import call_with_retries
 
 U = TypeVar("U")
 
@@ -114,16 +116,31 @@ class Stage(ABC, Generic[U]):
         videos) overrides this; it must still finish what completed before a FatalError."""
         for unit in units:
             ctx.emit(self.event("started", unit))
-            inputs = self.fingerprint(unit)  # before reading: a file changed meanwhile is redone
-            try:
-                result = self.process(unit, ctx)
-            except FatalError:
-                raise
-            except Exception as e:  # one unit's failure must not cost the shard's others
-                result = self.set_aside(unit, e)
-                if result is None:
+            finish(unit, self.run_unit(unit, ctx))
+
+    def run_unit(self, unit: U, ctx: WorkerContext) -> UnitResult:
+        """`process(unit)`, tried again on RetryableError (`ctx.retry`, each lost try a `retry`
+        event); any other failure but a FatalError becomes the stage's set-aside, and so does
+        a RetryableError after the last try."""
+        inputs = self.fingerprint(unit)  # before reading: a file changed meanwhile is redone
+        try:
+            result = call_with_retries(lambda: self.process(unit, ctx), ctx.retry,
+                                       lambda k, e, wait: ctx.emit(self.retry_event(unit, k, e, wait)))
+        except FatalError:
+            raise
+        except Exception as e:  # one unit's failure must not cost the shard's others
+            result = self.set_aside(unit, e)
+            if result is None:
+                if not isinstance(e, RetryableError):
                     raise
-            finish(unit, result.model_copy(update={"inputs": inputs}))
+                result = UnitResult.set_aside(type(e).__name__, f"{e} (gave up after {ctx.retry.tries} tries)")
+        return result.model_copy(update={"inputs": inputs})
+
+    def retry_event(self, unit: U, lost: int, error: Exception, wait_s: float):
+        from pipeline.runner.events import Event
+
+        return Event(kind="retry", unit=self.unit_id(unit), stage=self.name, attempt=lost,
+                     reason=f"{type(error).__name__}: {error}"[:300], detail=f"next try in {wait_s:.1f} s")
 
     def event(self, kind: str, unit: U, result: UnitResult | None = None):
         from pipeline.runner.events import Event

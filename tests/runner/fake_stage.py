@@ -3,7 +3,8 @@
 Units are names; a unit reads `in/<name>` (its input), writes `out/<name>` atomically and
 records in `runs/<name>` the pid and the number of units its worker's context has run.
 `modes` makes a unit fail ("fail": raises, set aside) or kill its own worker ("die": on
-its first attempt, "always": on every one).
+its first attempt, "always": on every one), or raise `RetryableError` ("flaky": on its
+first try, "busy": on every one).
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from pipeline.atomic import file_stamp, write_text
+from pipeline.errors import RetryableError
 from pipeline.runner import Stage, UnitResult, WorkerContext
 
 
@@ -66,6 +68,8 @@ class FakeStage(Stage):
             os.kill(os.getpid(), signal.SIGKILL)
         if mode == "fail":
             raise ValueError(f"{unit} is broken")
+        if mode == "busy" or (mode == "flaky" and len((runs / unit).read_text().splitlines()) == 1):
+            raise RetryableError(f"{unit}: server busy (503)")
         text = (self.root / "in" / unit).read_text()
         write_text(self.root / "out" / unit, text.upper())
         return UnitResult(info={"chars": len(text)}, ok=not text.startswith("x"))

@@ -105,3 +105,24 @@ def test_local_and_ray_executors_emit_the_same_events(tmp_path):
         assert max(n for u in NAMES for _, n in _runs(tmp_path / name, u)) >= 3
     assert shapes[0] == shapes[1] == shapes[2]
     assert [k for _, k, *_ in shapes[0]].count("set_aside") == 1 and len(shapes[0]) == 10  # started + outcome
+
+
+def test_a_retryable_error_is_retried_with_backoff_and_set_aside_after_the_last_try(tmp_path):
+    """The taxonomy's RetryableError: a flaky unit succeeds on its second try; a unit that stays
+    busy is tried `tries` times, each lost try a `retry` event with its wait, then set aside."""
+    from pipeline.config import ExecutorConfig, RetryConfig
+    from pipeline.executors import make_executor
+
+    stage = make(tmp_path, NAMES, {"u1": "flaky", "u3": "busy"})
+    cfg = ExecutorConfig(workers=2, retry=RetryConfig(tries=3, backoff_s=0.2, max_backoff_s=0.3))
+    events: list[Event] = []
+    stats = _runner(make_executor(cfg)).run(stage, None, on_event=events.append)
+    assert stats.ran == 4 and (tmp_path / "out" / "u1").read_text() == "U1 INPUT"
+    assert len(_runs(tmp_path, "u1")) == 2 and len(_runs(tmp_path, "u3")) == 3
+    retries = sorted((e.unit, e.attempt, e.detail) for e in stats.retried)
+    assert retries == [("u1", 1, "next try in 0.2 s"), ("u3", 1, "next try in 0.2 s"), ("u3", 2, "next try in 0.3 s")]
+    assert all(e.stage == "fake" and e.reason == f"RetryableError: {e.unit}: server busy (503)" for e in stats.retried)
+    [aside] = stats.set_aside
+    assert (aside.unit, aside.reason) == ("u3", "RetryableError")
+    assert not (tmp_path / "_done" / "u3.done").exists() and (tmp_path / "aside" / "u3.txt").exists()
+    assert [e.kind for e in events if e.unit == "u1"] == ["started", "retry", "done"]
