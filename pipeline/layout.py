@@ -135,6 +135,11 @@ def scene_id(key: str, step: int) -> str:
     return f"{key}/{scene_stem(step)}"
 
 
+def scene_unit(key: str, step: int) -> str:
+    """A scene's id as one file name (its done markers): `scene_id` with `/` as `__`."""
+    return scene_id(key, step).replace("/", "__")
+
+
 def scene_dir(root: Path, key: str) -> Path:
     return Path(root) / scene_rel(key)
 

@@ -8,7 +8,8 @@ Output folder (default `<run>/release/`):
     scenarios.parquet        the manifest (`pipeline.release.manifest`), certificate included
     README.md, figures/      the dataset card (`pipeline.release.card`)
     SHA256SUMS               every released file above (`sha256sum -c SHA256SUMS` works)
-    _build/                  NOT part of the set: build time, quarantined annotations, cache
+    _build/                  NOT part of the set: build time, quarantined annotations, certificates
+                             (`_build/certificates/_done/`, see `pipeline.release.certify`)
 Invariants: released bytes depend only on the inputs and the config (no timestamps, no
 absolute paths, sorted rows), so the same config and seed rebuild them byte for byte; scene
 files are copied unchanged; files of scenes no longer released are removed.
@@ -18,17 +19,22 @@ from __future__ import annotations
 
 import datetime
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from rich.console import Console
 
 from pipeline.atomic import write_bytes, write_json, write_text
 from pipeline.config import Config
-from pipeline.layout import RELEASE_BUILD, RELEASE_CARD, RELEASE_SUMS, SCENE_PREFIX, STATE_SUFFIX, ReleaseLayout, RunLayout
+from pipeline.layout import (RELEASE_BUILD, RELEASE_CARD, RELEASE_SUMS, SCENE_PREFIX, STATE_SUFFIX, ReleaseLayout,
+                             RunLayout, episode_key, scene_unit)
 from pipeline.release.card import FIGURE, render_card, write_figure
 from pipeline.release.certify import SceneRef, certify_all
 from pipeline.release.manifest import MANIFEST_NAME, ScenarioRow, sha256_file, write_manifest
 from pipeline.records import QuarantineEntry, QuarantineReason
 from pipeline.release.sources import ReleaseItem, gather
+
+if TYPE_CHECKING:
+    from pipeline.executors import Executor
 
 SUMS_NAME = RELEASE_SUMS
 BUILD_DIR = RELEASE_BUILD
@@ -90,7 +96,7 @@ def _remove_stale(out: Path, keep: set[str]) -> int:
     return removed
 
 
-def build(cfg: Config, console: Console | None = None) -> list[ScenarioRow]:
+def build(cfg: Config, console: Console | None = None, executor: Executor | None = None) -> list[ScenarioRow]:
     import numpy as np
 
     console = console or Console()
@@ -108,10 +114,12 @@ def build(cfg: Config, console: Console | None = None) -> list[ScenarioRow]:
         rows.append(_row(item, out, bddl, state, history, dim))
 
     refs = [SceneRef(r.suite, r.task, r.instruction, out / r.bddl_path, out / r.state_path,
-                     f"{r.bddl_sha256[:16]}-{r.state_sha256[:16]}") for r in rows]
-    certs = certify_all(refs, cfg, out / BUILD_DIR / "certificates", cfg.release.certify_expert)
+                     f"{r.bddl_sha256[:16]}-{r.state_sha256[:16]}",
+                     scene_unit(episode_key(r.suite, r.task, r.episode_id), r.step)) for r in rows]
+    certs = certify_all(refs, cfg, out / BUILD_DIR / "certificates", cfg.release.certify_expert,
+                        executor=executor, console=console)
     for i, ref in enumerate(refs):
-        c = certs.get(ref.cache_key)
+        c = certs.get(ref.unit)
         if c is not None:
             rows[i] = rows[i].model_copy(update={"certified": c.certified, "certify_tries": c.tries,
                                                  "certify_successes": c.successes,

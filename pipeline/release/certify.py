@@ -6,26 +6,37 @@ give-up reason, `timeout` or `goal_not_reached`, see `pipeline.release.experts`)
 success certifies the scene recoverable. Not certified is not a rejection (it is shown to
 reviewers and in the card). The expert is the recovery expert by default (`expert=plain`
 runs the old one, for the before/after benchmark). Tries differ by seed; we stop at the
-first success. Results are cached under `<release>/_build/certificates/` keyed by the
-scene files' SHA-256, the expert and the try settings, so a rebuild after a crash redoes
-only unfinished scenes. Scenes are grouped by task so each environment is built once.
+first success.
+
+Certification is a `Stage` (`CertifyStage`, one unit per scene) run by the `Runner` on the
+configured executor (`inline`, `local`, `ray`): the certificate is the scene's done marker
+(`<release>/_build/certificates/_done/<scene>.done`), whose recorded inputs are everything
+that changes a certificate (the scene files' SHA-256, expert and its version, tries,
+horizon, chunk size), so a rebuild redoes only scenes that are unfinished or whose inputs
+changed. Scenes of one task and BDDL share a shard (one environment build); a scene whose
+worker keeps dying, or that raises, is set aside with the reason (no certificate: the
+manifest says not attempted, and the next build tries again).
 """
 
 from __future__ import annotations
 
-import json
 from dataclasses import asdict, dataclass
-from itertools import groupby
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
-from rich.progress import Progress
 
-from pipeline.atomic import write_json
+from pipeline.atomic import Completions
 from pipeline.config import Config
-from pipeline.release.experts import RECOVERY, ExpertFactory, attempt, expert_factory, plain_expert
+from pipeline.release.experts import RECOVERY, attempt, expert_factory, plain_expert
 from pipeline.release.scene_physics import scene_task
-from pipeline.sim import SimEnv
+from pipeline.runner import Stage, UnitResult, WorkerContext
+
+if TYPE_CHECKING:
+    from rich.console import Console
+
+    from pipeline.executors import Executor
+    from pipeline.sim import SimEnv
 
 # bump when the experts change so cached certificates of an older expert are not reused
 EXPERT_VERSION = {"plain": 3, "recovery": 4}
@@ -39,6 +50,11 @@ class SceneRef:
     bddl: Path
     state: Path
     cache_key: str  # e.g. "<bddl sha>-<state sha>"
+    unit_id: str = ""  # the scene's marker name (`layout.scene_unit`); default: cache_key
+
+    @property
+    def unit(self) -> str:
+        return self.unit_id or self.cache_key
 
 
 @dataclass(frozen=True)
@@ -57,7 +73,7 @@ def make_expert(cfg: Config):
     return plain_expert(cfg)
 
 
-def certify_one(env: SimEnv, state: np.ndarray, policy, tries: int, horizon: int, chunk_size: int) -> Certificate:
+def certify_one(env: "SimEnv", state: np.ndarray, policy, tries: int, horizon: int, chunk_size: int) -> Certificate:
     """Up to `tries` attempts; `policy` is a built policy or an `ExpertFactory`."""
     reason = None
     for k in range(tries):
@@ -73,33 +89,66 @@ def certify_one(env: SimEnv, state: np.ndarray, policy, tries: int, horizon: int
     return Certificate(tries=tries, successes=0, reason=reason)
 
 
-def certify_all(scenes: list[SceneRef], cfg: Config, cache_dir: Path, expert: str = RECOVERY) -> dict[str, Certificate]:
-    """Certificates by `cache_key`; empty when `certify_tries` is 0."""
-    rc = cfg.release
-    if rc.certify_tries == 0 or not scenes:
-        return {}
-    out: dict[str, Certificate] = {}
-    suffix = f"{expert}{EXPERT_VERSION[expert]}-t{rc.certify_tries}-h{rc.certify_horizon}-c{cfg.stage1.rollout.chunk_size}"
-    todo = []
-    for s in scenes:
-        f = cache_dir / f"{s.cache_key}-{suffix}.json"
-        if f.is_file():
-            out[s.cache_key] = Certificate(**json.loads(f.read_text()))
-        else:
-            todo.append(s)
-    if not todo:
+@dataclass
+class CertifyStage(Stage[SceneRef]):
+    """One unit per scene; its certificate is the marker's info (see the module docstring)."""
+
+    cfg: Config
+    scenes: list[SceneRef]
+    folder: Path  # <release>/_build/certificates
+    expert: str = RECOVERY
+    name: str = "certify"
+
+    @property
+    def root(self) -> Path:
+        return self.folder
+
+    def units(self, cfg: Config) -> list[SceneRef]:
+        return sorted(self.scenes, key=lambda s: (s.suite, s.task, s.cache_key, s.unit))
+
+    def unit_id(self, scene: SceneRef) -> str:
+        return scene.unit
+
+    def fingerprint(self, scene: SceneRef) -> dict:
+        rc = self.cfg.release
+        return {"scene": scene.cache_key, "expert": f"{self.expert}{EXPERT_VERSION[self.expert]}",
+                "tries": rc.certify_tries, "horizon": rc.certify_horizon, "chunk": self.cfg.stage1.rollout.chunk_size}
+
+    def group(self, scene: SceneRef):
+        return scene.suite, scene.task, scene.cache_key.split("-")[0]  # one model (task, BDDL) per shard
+
+    def process(self, scene: SceneRef, ctx: WorkerContext) -> UnitResult:
+        rc = self.cfg.release
+        env = ctx.env(scene_task(scene.suite, scene.task, scene.instruction, scene.bddl))
+        cert = certify_one(env, np.load(scene.state, allow_pickle=False), expert_factory(self.expert, self.cfg),
+                           rc.certify_tries, rc.certify_horizon, self.cfg.stage1.rollout.chunk_size)
+        return UnitResult(info=asdict(cert), ok=cert.certified,
+                          status="certified" if cert.certified else "not certified", reason=cert.reason)
+
+    def set_aside(self, scene: SceneRef, error: Exception) -> UnitResult:
+        return UnitResult.set_aside(type(error).__name__, f"{scene.bddl}: {error}")
+
+    def certificates(self) -> dict[str, Certificate]:
+        """The current certificate of every scene that has one, by unit id."""
+        from pipeline.runner.runner import is_current
+
+        marks, out = Completions(self.root), {}
+        for s in self.scenes:
+            if is_current(marks, self, s):
+                info = marks.info(s.unit) or {}
+                out[s.unit] = Certificate(**{k: info[k] for k in ("tries", "successes", "reason")})
         return out
-    factory: ExpertFactory = expert_factory(expert, cfg)
-    todo.sort(key=lambda s: (s.suite, s.task, s.bddl.read_bytes()))
-    with Progress(transient=True) as bar:
-        job = bar.add_task(f"certifying scenes ({expert} expert)", total=len(todo))
-        for _, group in groupby(todo, key=lambda s: (s.suite, s.task, s.bddl.read_bytes())):
-            group = list(group)
-            with SimEnv(scene_task(group[0].suite, group[0].task, group[0].instruction, group[0].bddl)) as env:
-                for s in group:
-                    cert = certify_one(env, np.load(s.state), factory, rc.certify_tries, rc.certify_horizon,
-                                       cfg.stage1.rollout.chunk_size)
-                    write_json(cache_dir / f"{s.cache_key}-{suffix}.json", asdict(cert))
-                    out[s.cache_key] = cert
-                    bar.advance(job)
-    return out
+
+
+def certify_all(scenes: list[SceneRef], cfg: Config, cache_dir: Path, expert: str = RECOVERY,
+                executor: Executor | None = None, console: Console | None = None) -> dict[str, Certificate]:
+    """Certificates by the scenes' `unit`, after running the missing ones on `executor` (default:
+    the configured one); empty when `certify_tries` is 0. A scene set aside has none."""
+    if cfg.release.certify_tries == 0 or not scenes:
+        return {}
+    from pipeline.executors import make_executor
+    from pipeline.runner import Runner
+
+    stage = CertifyStage(cfg, scenes, cache_dir, expert)
+    Runner(executor or make_executor(cfg.executor), console=console).run(stage, cfg)
+    return stage.certificates()

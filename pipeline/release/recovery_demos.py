@@ -40,7 +40,7 @@ from pipeline import SCHEMA_VERSION
 from pipeline.atomic import Completions, write_text, write_with
 from pipeline.config import Config
 from pipeline.errors import FatalError
-from pipeline.layout import RecoveriesLayout, RunLayout, episode_key
+from pipeline.layout import RecoveriesLayout, RunLayout, episode_key, scene_unit
 from pipeline.layout import scene_id as layout_scene_id
 from pipeline.release.experts import attempt, recovery_expert
 from pipeline.release.manifest import MANIFEST_NAME, ScenarioRow, read_manifest
@@ -131,7 +131,7 @@ def read_demos(path: Path) -> list[DemoRecord]:
 
 
 def _unit(row: ScenarioRow) -> str:
-    return scene_id(row).replace("/", "__")
+    return scene_unit(episode_key(row.suite, row.task, row.episode_id), row.step)
 
 
 def _record_scene(env, row: ScenarioRow, state: np.ndarray, cfg: Config, root: Path, submit) -> dict:

@@ -132,11 +132,12 @@ def npy_bytes(arr: np.ndarray) -> bytes:
     return buf.getvalue()
 
 
-def release_config(run: Path, **release):
+def release_config(run: Path, executor: str = "local", **release):
     from pipeline.config import Config
 
     return Config.model_validate({
         "run": {"output_dir": str(run)},
+        "executor": {"kind": executor},
         "tasks": {"suites": [SUITE], "max_tasks_per_suite": 1, "init_states": [0]},
         "release": {"certify_tries": 0, **release},
     })

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import pyarrow.parquet as pq
 import pytest
 
@@ -18,15 +20,26 @@ def run(tmp_path, scene_source):
     return make_run(tmp_path / "run", scene_source, {"ep-a": (npy_bytes(scene_source.failure), scene_source.bddl_text)})
 
 
-def test_a_scene_the_recovery_expert_recovers_is_certified_and_cached(run, monkeypatch):
-    (row,) = build(release_config(run, certify_tries=2, certify_horizon=300))
+def test_a_scene_the_recovery_expert_recovers_is_certified_and_its_marker_is_the_cache(run, monkeypatch):
+    cfg = release_config(run, "inline", certify_tries=2, certify_horizon=300)
+    (row,) = build(cfg)
     assert (row.certified, row.certify_successes, row.certify_tries, row.certify_reason) == (True, 1, 1, None)
     card = (run / "release" / "README.md").read_text()
     assert "Certified: 1 of 1 attempted" in card and "The recovery expert" in card
-    # a rebuild reads the cached certificate instead of building an environment again
-    monkeypatch.setattr(certify, "SimEnv", lambda *a, **k: pytest.fail("certificate was recomputed"))
-    (again,) = build(release_config(run, certify_tries=2, certify_horizon=300))
+    [marker] = (run / "release" / "_build" / "certificates" / "_done").iterdir()
+    info = json.loads(marker.read_text())
+    assert marker.name == f"{row.suite}__{row.task}__{row.episode_id}__step_{row.step:04d}.done"
+    assert info["inputs"] == {"scene": f"{row.bddl_sha256[:16]}-{row.state_sha256[:16]}", "expert": "recovery4",
+                              "tries": 2, "horizon": 300, "chunk": 8}
+    # a rebuild reads the marker instead of running the expert again ...
+    monkeypatch.setattr(certify, "certify_one", lambda *a, **k: pytest.fail("certificate was recomputed"))
+    (again,) = build(cfg)
     assert again == row
+    # ... until something that changes a certificate changes (here the horizon)
+    monkeypatch.undo()
+    (shorter,) = build(release_config(run, "inline", certify_tries=2, certify_horizon=3))
+    assert (shorter.certified, shorter.certify_reason) == (False, "timeout")
+    assert json.loads(marker.read_text())["inputs"]["horizon"] == 3
 
 
 def test_an_uncertified_scene_carries_the_reason_in_the_manifest_and_the_card(run):
@@ -65,5 +78,5 @@ def test_an_expert_that_crashes_on_a_scene_leaves_it_uncertified_with_the_error(
             raise RuntimeError("planner bug")
 
     monkeypatch.setattr(certify, "expert_factory", lambda kind, cfg: lambda env, seed, variation: Broken())
-    (row,) = build(release_config(run, certify_tries=1, certify_horizon=50))
+    (row,) = build(release_config(run, "inline", certify_tries=1, certify_horizon=50))
     assert (row.certified, row.certify_reason) == (False, "expert_error: RuntimeError: planner bug")
