@@ -25,10 +25,9 @@ from rich.console import Console
 
 from pipeline.atomic import write_bytes, write_json, write_text
 from pipeline.config import Config
-from pipeline.layout import (RELEASE_BUILD, RELEASE_CARD, RELEASE_SUMS, SCENE_PREFIX, STATE_SUFFIX, ReleaseLayout,
-                             RunLayout, episode_key, scene_unit)
+from pipeline.layout import RELEASE_BUILD, RELEASE_CARD, RELEASE_SUMS, SCENE_PREFIX, STATE_SUFFIX, ReleaseLayout, RunLayout
 from pipeline.release.card import FIGURE, render_card, write_figure
-from pipeline.release.certify import SceneRef, certify_all
+from pipeline.release.certify import certify_all, scene_refs
 from pipeline.release.manifest import MANIFEST_NAME, ScenarioRow, sha256_file, write_manifest
 from pipeline.records import QuarantineEntry, QuarantineReason
 from pipeline.release.sources import ReleaseItem, gather
@@ -113,9 +112,7 @@ def build(cfg: Config, console: Console | None = None, executor: Executor | None
         bddl, state, history = _place_files(item, out)
         rows.append(_row(item, out, bddl, state, history, dim))
 
-    refs = [SceneRef(r.suite, r.task, r.instruction, out / r.bddl_path, out / r.state_path,
-                     f"{r.bddl_sha256[:16]}-{r.state_sha256[:16]}",
-                     scene_unit(episode_key(r.suite, r.task, r.episode_id), r.step)) for r in rows]
+    refs = scene_refs(rows, out)
     certs = certify_all(refs, cfg, out / BUILD_DIR / "certificates", cfg.release.certify_expert,
                         executor=executor, console=console)
     for i, ref in enumerate(refs):

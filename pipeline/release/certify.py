@@ -68,6 +68,15 @@ class Certificate:
         return self.successes > 0
 
 
+def scene_refs(rows, release: Path) -> list[SceneRef]:
+    """The scenes of manifest rows (`ScenarioRow`s) of the release in `release`."""
+    from pipeline.layout import episode_key, scene_unit
+
+    return [SceneRef(r.suite, r.task, r.instruction, release / r.bddl_path, release / r.state_path,
+                     f"{r.bddl_sha256[:16]}-{r.state_sha256[:16]}",
+                     scene_unit(episode_key(r.suite, r.task, r.episode_id), r.step)) for r in rows]
+
+
 def make_expert(cfg: Config):
     """The plain scripted expert with every noise knob at zero (kept for benchmarks)."""
     return plain_expert(cfg)
