@@ -13,8 +13,10 @@ Outputs under `<run>/recoveries/` (`RunLayout.recoveries`):
 Try k of a scene runs the recovery expert with seed `demo_seed(run seed, scene id, k)` and
 the configured variation (approach and speed); a try that does not reach the goal is no
 demo: it is counted (with the expert's reason) and its files are not kept. Tries stop at
-`recovery_demos` successes or `recovery_demo_tries` tries. Resumable per scene; a scene
-whose environment or state fails is set aside with the reason and the rest goes on.
+`recovery_demos` successes or `recovery_demo_tries` tries. The scenes run as a Stage
+(`DemoStage`, one unit per scene, stage 1's render-overlap stream: `pipeline.stage1.overlap`)
+by the `Runner` on the configured executor; resumable per scene; a scene whose environment,
+state or videos fail is set aside with the reason (`errors/<scene>.txt`) and the rest goes on.
 Nothing in `recover eval` reads these: they are training data.
 """
 
@@ -26,27 +28,32 @@ import shutil
 import time
 import traceback
 from collections import Counter
-from itertools import groupby
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
-from pydantic import BaseModel, ConfigDict
+from pydantic import BaseModel, ConfigDict, ValidationError
 from rich.console import Console
-from rich.progress import Progress
 
 from pipeline import SCHEMA_VERSION
 from pipeline.atomic import Completions, write_text, write_with
-from pipeline.config import Config
+from pipeline.config import Config, VideoConfig
 from pipeline.errors import FatalError
 from pipeline.layout import RecoveriesLayout, RunLayout, episode_key, scene_unit
 from pipeline.layout import scene_id as layout_scene_id
 from pipeline.release.experts import attempt, recovery_expert
 from pipeline.release.manifest import MANIFEST_NAME, ScenarioRow, read_manifest
 from pipeline.release.scene_physics import restore_scene, scene_task
-from pipeline.sim import EnvCache
+from pipeline.runner import UnitResult, WorkerContext
+from pipeline.stage1.overlap import Complete, RenderOverlapStage, Submit
 from pipeline.stage1.recorder import EpisodeRecorder
+
+if TYPE_CHECKING:
+    from pipeline.executors import Executor
 
 def scene_id(row: ScenarioRow) -> str:
     """The eval's scene id (`pipeline.eval.scenes`): stable across copies of the release."""
@@ -125,7 +132,7 @@ def read_demos(path: Path) -> list[DemoRecord]:
         r["videos"] = dict(r["videos"] or [])
         try:
             out.append(DemoRecord.model_validate(r))
-        except Exception as e:
+        except ValidationError as e:
             raise ValueError(f"{path}: row {i} invalid: {e}") from None
     return out
 
@@ -134,7 +141,8 @@ def _unit(row: ScenarioRow) -> str:
     return scene_unit(episode_key(row.suite, row.task, row.episode_id), row.step)
 
 
-def _record_scene(env, row: ScenarioRow, state: np.ndarray, cfg: Config, root: Path, submit) -> dict:
+def _record_scene(env, row: ScenarioRow, state: np.ndarray, cfg: Config, root: Path,
+                  submit: Callable[[DemoRecord, np.ndarray], None]) -> dict:
     """Run the tries of one scene; hand each demo to `submit(record, states)`; return its summary."""
     rc = cfg.release
     sid = scene_id(row)
@@ -169,9 +177,84 @@ def _record_scene(env, row: ScenarioRow, state: np.ndarray, cfg: Config, root: P
             "failed": dict(sorted(fails.items()))}
 
 
-def run(cfg: Config, console: Console | None = None) -> Path:
+@dataclass
+class DemoStage(RenderOverlapStage[ScenarioRow]):
+    """One unit per released scene: its tries here, each demo's videos in the worker's render
+    process meanwhile (stage 1's render-overlap stream); the marker holds the scene's summary
+    and its demos' records, written once every video is back."""
+
+    cfg: Config
+    rows: list[ScenarioRow]
+    name: str = "recovery demos"
+
+    @property
+    def root(self) -> Path:
+        return RunLayout.of(self.cfg).recoveries.root
+
+    @property
+    def release(self) -> Path:
+        from pipeline.release.build import release_dir
+
+        return release_dir(self.cfg)
+
+    @property
+    def video(self) -> VideoConfig:
+        return self.cfg.stage1.video
+
+    @property
+    def renders_videos(self) -> bool:
+        return True  # demos are training data: always with their videos
+
+    def units(self, cfg: Config) -> list[ScenarioRow]:
+        return list(self.rows) if cfg.release.recovery_demos else []
+
+    def unit_id(self, row: ScenarioRow) -> str:
+        return _unit(row)
+
+    def group(self, row: ScenarioRow):
+        return row.suite, row.task, row.bddl_sha256  # one model (task, BDDL) per shard
+
+    def unit_env(self, row: ScenarioRow, ctx: WorkerContext):
+        return ctx.env(scene_task(row.suite, row.task, row.instruction, self.release / row.bddl_path))
+
+    def simulate(self, row: ScenarioRow, ctx: WorkerContext, env, submit: Submit) -> Complete:
+        root, records = self.root, []
+        state = np.load(self.release / row.state_path, allow_pickle=False)
+
+        def demo(record: DemoRecord, states: np.ndarray) -> None:
+            records.append(record)
+            submit(states, root / record.path)
+
+        summary = _record_scene(env, row, state, self.cfg, root, demo)
+
+        def complete(videos: list[dict[str, str]]) -> UnitResult:
+            fps = self.video.fps
+            done = [r.model_copy(update={"videos": v, "video_fps": fps}) for r, v in zip(records, videos, strict=True)]
+            info = {**summary, "records": [r.model_dump(mode="json") for r in done]}
+            return UnitResult(info=info, ok=summary["demos"] > 0, status=f"{summary['demos']} demo(s)")
+
+        return complete
+
+    def set_aside(self, row: ScenarioRow, error: Exception) -> UnitResult:
+        write_text(RecoveriesLayout(self.root).error(self.unit_id(row)), traceback.format_exc())
+        return UnitResult.set_aside(type(error).__name__, str(error))
+
+    def render_failed(self, row: ScenarioRow, error: str) -> UnitResult:
+        write_text(RecoveriesLayout(self.root).error(self.unit_id(row)), error)
+        return UnitResult.set_aside("RenderError", error.strip().splitlines()[-1])
+
+    def worker_died(self, row: ScenarioRow, reason: str) -> None:
+        write_text(RecoveriesLayout(self.root).error(self.unit_id(row)), f"worker died: {reason}\n")
+
+    def after_done(self, row: ScenarioRow, result: UnitResult) -> None:
+        RecoveriesLayout(self.root).error(self.unit_id(row)).unlink(missing_ok=True)
+
+
+def run(cfg: Config, console: Console | None = None, executor: Executor | None = None) -> Path:
+    from pipeline.executors import make_executor
     from pipeline.release.build import release_dir
-    from pipeline.stage1.render_pool import RenderProcess
+    from pipeline.runner import Runner
+    from pipeline.stage1.run import WORKER_ENV
 
     console = console or Console()
     release = release_dir(cfg)
@@ -181,74 +264,10 @@ def run(cfg: Config, console: Console | None = None) -> Path:
         raise FatalError(f"{release / MANIFEST_NAME}: no release to record demos from; run `recover release` first") from None
     except ValueError as e:
         raise FatalError(str(e)) from None
-    root = RunLayout.of(cfg).recoveries.root
+    stage = DemoStage(cfg, rows)
+    root = stage.root
+    Runner(executor or make_executor(cfg.executor, worker_env=WORKER_ENV), console=console).run(stage, cfg)
     done = Completions(root)
-    v = cfg.stage1.video
-    todo = [r for r in rows if not done.is_done(_unit(r))] if cfg.release.recovery_demos else []
-    renders = RenderProcess() if todo else None
-    waiting: dict[str, list] = {}  # scene unit -> [summary, outstanding tickets, records]
-    tickets: dict[str, tuple[str, DemoRecord]] = {}
-    problems: list[str] = []
-
-    def collect(wait: bool) -> None:
-        for ticket, videos, error in renders.results(wait) if renders is not None else []:
-            unit, record = tickets.pop(ticket)
-            entry = waiting.get(unit)
-            if entry is None:  # its scene failed after submitting; already set aside
-                continue
-            entry[1] -= 1
-            if error is None:
-                entry[2].append(record.model_copy(update={"videos": videos, "video_fps": v.fps}))
-            else:
-                entry[0]["render_error"] = error.strip().splitlines()[-1]
-            if entry[1] == 0 and entry[0] is not None:
-                finish(unit)
-
-    def finish(unit: str) -> None:
-        summary, _, records = waiting.pop(unit)
-        if "render_error" in summary:  # no marker: the scene is redone on rerun
-            problems.append(f"{unit}: {summary['render_error']}")
-            return
-        summary["records"] = [r.model_dump(mode="json") for r in sorted(records, key=lambda r: r.demo_index)]
-        done.mark_done(unit, summary)
-
-    todo.sort(key=lambda r: (r.suite, r.task, (release / r.bddl_path).read_bytes()))
-    try:
-        with Progress(console=console, transient=True) as bar, EnvCache(capacity=1) as envs:
-            job = bar.add_task("recovery demos", total=len(todo))
-            for row in todo:
-                unit = _unit(row)
-                try:
-                    env = envs.get(scene_task(row.suite, row.task, row.instruction, release / row.bddl_path))
-                    state = np.load(release / row.state_path, allow_pickle=False)
-                    if not renders.alive:  # fail what it held (those scenes are redone), take a fresh one
-                        collect(wait=False)
-                        renders.close()
-                        renders = RenderProcess()
-                    renders.prepare(env, v.resolution, v.quality)
-                    waiting[unit] = [None, 0, []]
-
-                    def submit(record: DemoRecord, states: np.ndarray, unit=unit, env=env) -> None:
-                        ticket = f"{unit}/{record.demo_index}"
-                        tickets[ticket] = (unit, record)
-                        waiting[unit][1] += 1
-                        renders.submit(ticket, env, states, root / record.path, list(v.cameras), v.fps,
-                                       v.resolution, v.quality)
-
-                    waiting[unit][0] = _record_scene(env, row, state, cfg, root, submit)
-                except Exception as e:  # one scene's failure must not cost the others
-                    waiting.pop(unit, None)
-                    problems.append(f"{scene_id(row)}: {type(e).__name__}: {e}")
-                    write_text(RecoveriesLayout(root).error(unit), traceback.format_exc())
-                else:
-                    if waiting[unit][1] == 0:
-                        finish(unit)
-                collect(wait=False)
-                bar.advance(job)
-            collect(wait=True)
-    finally:
-        if renders is not None:
-            renders.close()
     summaries = [done.info(_unit(r)) for r in rows if done.is_done(_unit(r))]
     demos = [DemoRecord.model_validate(d) for s in summaries for d in s.get("records", [])]
     write_demos(RecoveriesLayout(root).demos, demos)
@@ -259,6 +278,4 @@ def run(cfg: Config, console: Console | None = None) -> Path:
     console.print(f"[green]{len(demos)} recovery demo(s)[/green] from {sum(x['demos'] > 0 for x in lines)} of "
                   f"{len(rows)} scene(s); {tries - len(demos)} unsuccessful tr{'y' if tries - len(demos) == 1 else 'ies'}"
                   f" not kept -> {root}")
-    for p in problems:
-        console.print(f"  [yellow]set aside[/yellow] {p}", highlight=False)
     return root

@@ -4,39 +4,31 @@ Units: `units.plan_units(cfg)`; shards: `units.make_shards` (episodes of one tas
 environment per shard). Per episode the worker takes the task's environment, the policy
 and its render process from its `WorkerContext`, runs and records the physics
 (worker.run_physics) and hands the states to the render process, which draws the videos
-while the next episodes run; the episode is finished (the runner writes
-`stage1/_done/<unit_id>.done` holding the EpisodeRecord) once its videos are back, all
-before the shard returns, and on a fatal error too. An episode that fails (an exception, a
-render process that died) is set aside: `stage1/errors/<unit_id>.txt` with the traceback,
+while the next episodes run (the render-overlap stream, overlap.py); the episode is
+finished (the runner writes `stage1/_done/<unit_id>.done` holding the EpisodeRecord) once
+its videos are back, all before the shard returns, and on a fatal error too. An episode
+that fails (an exception, a render process that died) is set aside: `stage1/errors/<unit_id>.txt` with the traceback,
 no marker, so the next run redoes it from an emptied folder; its marker removes the file.
 """
 
 from __future__ import annotations
 
 import traceback
-from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 from pipeline.atomic import write_text
-from pipeline.config import Config
-from pipeline.errors import FatalError
+from pipeline.config import Config, VideoConfig
 from pipeline.layout import RunLayout
 from pipeline.records import EpisodeRecord
-from pipeline.runner import Stage, UnitResult, WorkerContext
+from pipeline.runner import UnitResult, WorkerContext
+from pipeline.stage1.overlap import Complete, RenderOverlapStage, Submit
 from pipeline.stage1.units import EpisodeUnit, make_shards, plan_units
 from pipeline.stage1.worker import PolicyFactory, run_one, run_physics, with_videos
 
 
-def _render_process(ctx: WorkerContext):
-    """The worker's render process, started on first use and restarted if it died."""
-    from pipeline.stage1.render_pool import RenderProcess
-
-    return ctx.helper("render", RenderProcess, alive=lambda r: r.alive)
-
-
 @dataclass
-class Stage1(Stage[EpisodeUnit]):
+class Stage1(RenderOverlapStage[EpisodeUnit]):
     cfg: Config
     policy_factory: PolicyFactory | None = None  # tests; default pipeline.policies.factory.make_policy
     name: str = "stage 1"
@@ -82,6 +74,9 @@ class Stage1(Stage[EpisodeUnit]):
         write_text(RunLayout.of(self.cfg).stage1.error(unit.unit_id), text)
         return UnitResult.set_aside(reason, detail)
 
+    def render_failed(self, unit: EpisodeUnit, error: str) -> UnitResult:
+        return self._fail(unit, "RenderError", error.strip().splitlines()[-1], error)
+
     def set_aside(self, unit: EpisodeUnit, error: Exception) -> UnitResult:
         return self._fail(unit, type(error).__name__, str(error), traceback.format_exc())
 
@@ -91,45 +86,16 @@ class Stage1(Stage[EpisodeUnit]):
     def after_done(self, unit: EpisodeUnit, result: UnitResult) -> None:
         RunLayout.of(self.cfg).stage1.error(unit.unit_id).unlink(missing_ok=True)
 
-    def stream(self, units: list[EpisodeUnit], ctx: WorkerContext,
-               finish: Callable[[EpisodeUnit, UnitResult], None]) -> None:
-        """Physics here, videos in the worker's render process while the next episodes run;
-        each episode is finished once its videos are back, all before this returns."""
-        v, stage1 = self.cfg.stage1.video, self.root
-        renders = _render_process(ctx) if units and v.render != "none" else None  # spawns while the env builds
-        waiting: dict[str, tuple[EpisodeUnit, EpisodeRecord]] = {}
+    @property
+    def video(self) -> VideoConfig:
+        return self.cfg.stage1.video
 
-        def collect(wait: bool) -> None:
-            for ticket, videos, error in renders.results(wait) if renders is not None else []:
-                unit, record = waiting.pop(ticket)
-                if error is None:
-                    finish(unit, self._done(with_videos(record, videos, v.fps)))
-                else:
-                    finish(unit, self._fail(unit, "RenderError", error.strip().splitlines()[-1], error))
+    def unit_env(self, unit: EpisodeUnit, ctx: WorkerContext):
+        return self._env(unit, ctx)
 
-        try:
-            for unit in units:
-                ctx.emit(self.event("started", unit))
-                try:
-                    env = self._env(unit, ctx)
-                    if renders is not None and not renders.alive:  # fail what it held, take a fresh one
-                        collect(wait=False)
-                        renders = _render_process(ctx)
-                    if renders is not None:
-                        renders.prepare(env, v.resolution, v.quality)  # model loads during the physics
-                    record, states = run_physics(env, self._policy(ctx), unit, self.cfg, stage1)
-                    if states is not None:
-                        renders.submit(unit.unit_id, env, states, stage1 / unit.rel_dir, list(v.cameras), v.fps,
-                                       v.resolution, v.quality)
-                except FatalError:
-                    raise
-                except Exception as e:  # one episode's failure must not cost the others
-                    finish(unit, self.set_aside(unit, e))
-                    continue
-                if states is None:
-                    finish(unit, self._done(record))
-                else:
-                    waiting[unit.unit_id] = (unit, record)
-                collect(wait=False)
-        finally:
-            collect(wait=True)  # also on a fatal error: finished videos still get their markers
+    def simulate(self, unit: EpisodeUnit, ctx: WorkerContext, env, submit: Submit) -> Complete:
+        """Physics here; a failed episode's states go to the render process (overlap.py)."""
+        record, states = run_physics(env, self._policy(ctx), unit, self.cfg, self.root)
+        if states is not None:
+            submit(states, self.root / unit.rel_dir)
+        return lambda videos: self._done(with_videos(record, videos[0], self.video.fps) if videos else record)

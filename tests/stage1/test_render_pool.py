@@ -104,7 +104,7 @@ def test_an_episode_whose_render_process_died_is_left_unmarked_redone_on_rerun_a
     run_shard(job, ctx)
     done = Completions(stage1)
     first, second = units
-    assert killed == [first.unit_id] and not done.is_done(first.unit_id)
+    assert killed == [f"{first.unit_id}#0"] and not done.is_done(first.unit_id)  # ticket: unit # video set
     assert (stage1 / "errors" / f"{first.unit_id}.txt").read_text().startswith("render process died")
     assert done.is_done(second.unit_id)  # a fresh render process took the next episode
     assert np.load(stage1 / second.rel_dir / "states.npy").shape[0] == 14
