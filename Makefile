@@ -1,6 +1,8 @@
 # libero-recover. Two commands do everything on a fresh machine:
-#   make demo   set up, then stage 1 -> 2 -> 3 on the small embedded config
+#   make demo   set up, then `recover run` on the small embedded config: stage 1 -> 2 -> 3, then
+#               it stops at human review; `make run` again after review finishes release, demos, export
 #   make test   set up (with the test browser), then the whole test suite
+# The order of the steps is declared once, in pipeline/flow.py (STEPS); each target below runs one alone.
 SHELL := /bin/bash
 VENV ?= .venv
 PY := $(VENV)/bin/python
@@ -9,7 +11,7 @@ CONFIG ?= configs/smoke.yaml
 # real-simulator tests run in parallel, one worker per core
 PYTEST_WORKERS ?= 2
 
-.PHONY: setup setup-test demo test stage1 rerender stage2 stage3 review-status review-serve review-export bench-review release verify reproduce demos export-lerobot eval tasks bench clean
+.PHONY: setup setup-test demo run test stage1 rerender stage2 stage3 review-status review-serve review-export bench-review release verify reproduce demos export-lerobot eval tasks bench clean
 
 # setup is idempotent: the stamp re-runs it only when its inputs change
 $(VENV)/.setup-stamp: pyproject.toml requirements/sim.txt scripts/setup.sh
@@ -25,8 +27,11 @@ $(VENV)/.setup-test-stamp: $(VENV)/.setup-stamp requirements/lerobot-reader.txt 
 setup-test: $(VENV)/.setup-test-stamp
 
 demo: setup
-	$(MAKE) stage1 stage2 stage3 CONFIG=$(CONFIG)
+	$(RECOVER) run --config $(CONFIG)
 	$(RECOVER) review status --config $(CONFIG)
+
+run: setup
+	$(RECOVER) run --config $(CONFIG)
 
 test: setup-test
 	$(VENV)/bin/pytest -n $(PYTEST_WORKERS) --dist loadgroup -q

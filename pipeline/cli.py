@@ -70,6 +70,12 @@ def tasks(suite: list[str] = typer.Option(None, "--suite", "-s", help=f"one of {
     console.print(" + ".join(f"{s} {n}" for s, n in counts.items()) + f" = {len(chosen)}")
 
 
+@app.command("run")
+def run_all(config: Path = CONFIG, dry_run: bool = DRY) -> None:
+    """Every step in order (pipeline/flow.py): stops at human review, goes on after it; reruns only what is missing."""
+    _call("pipeline.flow:run", _load(config, dry_run), config)
+
+
 @app.command()
 def stage1(config: Path = CONFIG, dry_run: bool = DRY,
            rerender: bool = typer.Option(False, "--rerender", help="redraw the run's existing frames (videos, "

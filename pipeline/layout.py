@@ -485,3 +485,8 @@ class RunLayout:
     @property
     def lerobot(self) -> Path:
         return self.root / "lerobot"
+
+    @property
+    def pipeline(self) -> Path:
+        """`recover run`'s own folder: `_done/<step>.done` of its whole-run steps (pipeline/flow.py)."""
+        return self.root / "pipeline"
