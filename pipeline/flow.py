@@ -142,7 +142,7 @@ def _final_reviews(cfg: Config) -> str:
 
 def _release_inputs(cfg: Config) -> str:
     run = RunLayout.of(cfg)
-    return _hash(run.stage3.annotations, run.stage2.root / "localizations", run.stage1.manifest,
+    return _hash(run.stage3.annotations, run.stage2.localizations_dir, run.stage1.manifest,
                  cfg.release.model_dump(mode="json"), cfg.stage1.rollout.model_dump(mode="json"))
 
 
