@@ -26,7 +26,6 @@ from typing import Any
 
 from rich.console import Console
 
-from pipeline.atomic import Completions
 from pipeline.config import Config
 from pipeline.layout import RunLayout
 from pipeline.runner import Stage, UnitResult, WorkerContext
@@ -203,11 +202,11 @@ class WholeStep(Stage[str]):
 
 def pending(step: Step, cfg: Config, path: Path) -> int:
     """How many units of `step` are not done with their current inputs."""
-    from pipeline.runner.runner import is_current
+    from pipeline.runner.runner import finished
 
     stage = step.stage(cfg) if step.stage is not None else WholeStep(cfg, step, path)
-    marks = Completions(stage.root)
-    return sum(not is_current(marks, stage, u) for u in stage.units(cfg))
+    units = stage.units(cfg)
+    return len(units) - len(finished(stage, units))
 
 
 def run(cfg: Config, path: Path, console: Console | None = None) -> str:

@@ -26,7 +26,6 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from pipeline.atomic import Completions
 from pipeline.config import Config
 from pipeline.release.experts import RECOVERY, attempt, expert_factory, plain_expert
 from pipeline.release.scene_physics import scene_task
@@ -139,14 +138,10 @@ class CertifyStage(Stage[SceneRef]):
 
     def certificates(self) -> dict[str, Certificate]:
         """The current certificate of every scene that has one, by unit id."""
-        from pipeline.runner.runner import is_current
+        from pipeline.runner.runner import finished
 
-        marks, out = Completions(self.root), {}
-        for s in self.scenes:
-            if is_current(marks, self, s):
-                info = marks.info(s.unit) or {}
-                out[s.unit] = Certificate(**{k: info[k] for k in ("tries", "successes", "reason")})
-        return out
+        return {unit: Certificate(**{k: info[k] for k in ("tries", "successes", "reason")})
+                for unit, info in finished(self, self.scenes).items()}
 
 
 def certify_all(scenes: list[SceneRef], cfg: Config, cache_dir: Path, expert: str = RECOVERY,

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pyarrow as pa
 import pyarrow.parquet as pq
-from pydantic import BaseModel, ConfigDict
+from pydantic import BaseModel, ConfigDict, ValidationError
 
 from pipeline.arrow import I64, SCHEMA_METADATA, arrow_schema
 from pipeline.atomic import write_with
@@ -107,6 +107,6 @@ def read_manifest(path: str | Path) -> list[ScenarioRow]:
     for i, rec in enumerate(table.select([f.name for f in SCENARIO_SCHEMA if f.name in table.column_names]).to_pylist()):
         try:
             out.append(ScenarioRow.model_validate(rec))
-        except Exception as e:
+        except ValidationError as e:
             raise ValueError(f"{path}: row {i} invalid: {e}") from None
     return out

@@ -40,7 +40,7 @@ from pydantic import BaseModel, ConfigDict, ValidationError
 from rich.console import Console
 
 from pipeline import SCHEMA_VERSION
-from pipeline.atomic import Completions, write_text, write_with
+from pipeline.atomic import write_text, write_with
 from pipeline.config import Config, VideoConfig
 from pipeline.errors import FatalError
 from pipeline.layout import RecoveriesLayout, RunLayout, episode_key, scene_unit
@@ -267,8 +267,9 @@ def run(cfg: Config, console: Console | None = None, executor: Executor | None =
     stage = DemoStage(cfg, rows)
     root = stage.root
     Runner(executor or make_executor(cfg.executor, worker_env=WORKER_ENV), console=console).run(stage, cfg)
-    done = Completions(root)
-    summaries = [done.info(_unit(r)) for r in rows if done.is_done(_unit(r))]
+    from pipeline.runner.runner import finished
+
+    summaries = list(finished(stage, rows).values())
     demos = [DemoRecord.model_validate(d) for s in summaries for d in s.get("records", [])]
     write_demos(RecoveriesLayout(root).demos, demos)
     lines = [{k: s[k] for k in ("scene_id", "level", "category", "tries", "demos", "failed")} for s in summaries]

@@ -43,6 +43,13 @@ def is_current(marks: Completions, stage: Stage, unit: Any) -> bool:
     return info is not None and info.get("inputs", fp) == fp
 
 
+def finished(stage: Stage, units: list) -> dict[str, dict]:
+    """What each unit of `units` that is done with its current inputs recorded, by unit id
+    (how a stage reads back its results: certificates, demo summaries)."""
+    marks = Completions(stage.root)
+    return {stage.unit_id(u): marks.info(stage.marker_id(u)) or {} for u in units if is_current(marks, stage, u)}
+
+
 def run_shard(job: tuple, ctx: WorkerContext) -> int:
     """Executor entry point (every executor, every stage): `job` is (stage, units) or (stage,
     units, RetryConfig); returns the units marked done."""
