@@ -10,6 +10,14 @@ time stamps), and a file that differs only there is reported as such.
 
     .venv/bin/python benchmarks/output_digest.py -c configs/smoke.yaml --out before.json
     .venv/bin/python benchmarks/output_digest.py --compare before.json after.json
+    .venv/bin/python benchmarks/output_digest.py --compare-subset BEFORE_RUN AFTER_RUN
+
+`--compare-subset` compares two run folders where AFTER ran a subset of BEFORE's units (fewer
+tasks, same seed and settings: an episode's outputs depend only on what identifies it):
+every file of AFTER must be byte-identical to BEFORE's (or differ only in wall-clock
+fields), a Parquet table's rows must be among BEFORE's rows, a text list's lines among its
+lines (`.jsonl`, SHA256SUMS); what summarizes the whole set (the dataset card, its figure)
+is listed apart.
 
 The review step only talks HTTP and the CLI, so the same script drives the code before and
 after a refactor of the internals. Exit 1 when `--compare` finds a difference.
@@ -168,6 +176,58 @@ def compare(a_path: Path, b_path: Path) -> int:
     return 0 if same else 1
 
 
+SET_LEVEL = re.compile(r"(^|/)(README\.md|figures/.*\.png|model_vs_truth\.json|agreement\.(json|png))$")
+
+
+def _rows(p: Path) -> tuple[str, set[str]]:
+    import pyarrow.parquet as pq
+
+    t = pq.read_table(p)
+    rows = _strip(t.drop_columns([c for c in t.column_names if c in CLOCK_KEYS]).to_pylist())
+    return t.schema.remove_metadata().to_string(), {json.dumps(r, sort_keys=True, default=str) for r in rows}
+
+
+def compare_subset(before: Path, after: Path) -> int:
+    """AFTER ran a subset of BEFORE's units: every AFTER file is BEFORE's, or a subset of it."""
+    kinds: dict[str, list[str]] = {k: [] for k in ("identical", "wall-clock only", "rows among before's",
+                                                    "lines among before's", "set-level", "only after", "different")}
+    for p in sorted(after.rglob("*")):
+        rel = p.relative_to(after).as_posix()
+        if not p.is_file() or VOLATILE.search("/" + rel):
+            continue
+        q = before / rel
+        if not q.is_file():
+            kinds["only after"].append(rel)
+        elif p.read_bytes() == q.read_bytes():
+            kinds["identical"].append(rel)
+        elif (h := clock_free_hash(p)) is not None and h == clock_free_hash(q):
+            kinds["wall-clock only"].append(rel)
+        elif p.suffix == ".parquet" and (ra := _rows(p))[0] == (rb := _rows(q))[0] and ra[1] <= rb[1]:
+            kinds["rows among before's"].append(f"{rel} ({len(ra[1])} of {len(rb[1])} rows)")
+        elif (p.suffix == ".jsonl" or p.name == "SHA256SUMS") and \
+                set(p.read_text().splitlines()) <= set(q.read_text().splitlines()):
+            kinds["lines among before's"].append(rel)
+        elif SET_LEVEL.search(rel):
+            kinds["set-level"].append(rel)
+        else:
+            kinds["different"].append(rel)
+    n_before = sum(1 for p in before.rglob("*") if p.is_file() and not VOLATILE.search("/" + p.relative_to(before).as_posix()))
+    console.print(f"{sum(map(len, kinds.values()))} files in {after} (a subset run), {n_before} in {before}")
+    for name, ks in kinds.items():
+        console.print(f"{name}: {len(ks)}")
+        if name != "identical":
+            for k in ks[:40]:
+                console.print(f"  {k}")
+    by_folder: dict[str, int] = {}
+    for k in kinds["identical"] + kinds["wall-clock only"]:
+        g = "/".join(k.split("/")[:1])
+        by_folder[g] = by_folder.get(g, 0) + 1
+    console.print(f"identical (incl. wall-clock only) by folder: {by_folder}")
+    same = not (kinds["different"] or kinds["only after"])
+    console.print("[green]every file of the subset run is the full run's[/]" if same else "[red]outputs differ[/]")
+    return 0 if same else 1
+
+
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("-c", "--config", type=Path)
@@ -175,10 +235,13 @@ def main() -> int:
     ap.add_argument("--reviewers", type=int, default=2)
     ap.add_argument("--fresh", action="store_true", help="delete the run folder first")
     ap.add_argument("--compare", nargs=2, type=Path, metavar=("BEFORE", "AFTER"))
+    ap.add_argument("--compare-subset", nargs=2, type=Path, metavar=("BEFORE_RUN", "AFTER_RUN"))
     ap.add_argument("--digest-only", type=Path, metavar="RUN", help="digest an existing run folder, run nothing")
     a = ap.parse_args()
     if a.compare:
         return compare(*a.compare)
+    if a.compare_subset:
+        return compare_subset(*a.compare_subset)
     if a.digest_only:
         d = digest(a.digest_only)
         a.out.write_text(json.dumps({**d, "run": str(a.digest_only)}, indent=1))
