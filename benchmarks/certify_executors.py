@@ -8,6 +8,8 @@ the real path (`pipeline.release.certify.certify_all`: the `CertifyStage` run by
 - `local<N>` for each `--workers N`: wall time of each, the speed-up over the first, and
   whether the certificates are identical to each other and to the ones in the manifest
   (what the release build computed);
+- `--stage2 RUN` certifies the scenes of a run's stage 2 (no release needed; the same scene
+  files a release of them copies), without a manifest to compare with;
 - with `--ray`: a local `ray.cluster_utils.Cluster` (a head that runs nothing and two
   one-CPU worker nodes); once a third of the scenes are done one worker node is removed.
   Shows that every scene got exactly one `done` event and one marker, the shards lost with
@@ -53,6 +55,26 @@ def manifest_certificates(rows, refs) -> dict[str, Certificate]:
     """What the release build wrote into the manifest, as certificates by scene."""
     return {ref.unit: Certificate(r.certify_tries, r.certify_successes, r.certify_reason)
             for r, ref in zip(rows, refs) if r.certified is not None}
+
+
+def stage2_scenes(run: Path):
+    """Scenes straight from a run's stage-2 localizations (what a release of every localized
+    episode, reviewed without moving an onset, would certify): the refs, no manifest."""
+    from pipeline.layout import episode_key, parse_key, scene_unit
+    from pipeline.records import Localization
+    from pipeline.release.certify import SceneRef
+    from pipeline.release.manifest import sha256_file
+
+    root = RunLayout(run).stage2.root
+    refs = []
+    for f in sorted(RunLayout(run).stage2.localizations_dir.rglob("*.json")):
+        loc = Localization.model_validate_json(f.read_text())
+        suite, task, ep = parse_key(loc.key)
+        bddl, state = root / loc.scene_bddl, root / loc.scene_state
+        refs.append(SceneRef(suite, task, loc.instruction, bddl, state,
+                             f"{sha256_file(bddl)[:16]}-{sha256_file(state)[:16]}",
+                             scene_unit(episode_key(suite, task, ep), loc.scene_step)))
+    return refs
 
 
 def run_local(cfg, refs, folder: Path, workers: int) -> tuple[dict, float]:
@@ -111,16 +133,20 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("-c", "--config", type=Path, required=True)
     ap.add_argument("--release", type=Path, help="release folder (default: the config's)")
-    ap.add_argument("--workers", type=int, nargs="+", default=[1, 2])
+    ap.add_argument("--stage2", type=Path, metavar="RUN", help="certify the stage-2 scenes of this run folder instead")
+    ap.add_argument("--workers", type=int, nargs="*", default=[1, 2], help="local runs (none: --ray only)")
     ap.add_argument("--ray", action="store_true", help="also certify on a local Ray cluster losing a node")
     ap.add_argument("--out", type=Path, default=None)
     args = ap.parse_args()
     cfg = load_config(args.config)
     release = args.release or RunLayout.of(cfg).release.root
     out = args.out or RunLayout.of(cfg).root / "bench" / "certify_executors"
-    rows = read_manifest(release / MANIFEST_NAME)
-    refs = scene_refs(rows, release)
-    reference = manifest_certificates(rows, refs)
+    if args.stage2:
+        release, refs, reference = args.stage2 / "stage2", stage2_scenes(args.stage2), {}
+    else:
+        rows = read_manifest(release / MANIFEST_NAME)
+        refs = scene_refs(rows, release)
+        reference = manifest_certificates(rows, refs)
     console.print(f"{len(refs)} scenes of {release}; expert {cfg.release.certify_expert}, tries "
                   f"{cfg.release.certify_tries}, horizon {cfg.release.certify_horizon}; {os.cpu_count()} cpus, "
                   f"load {os.getloadavg()[0]:.1f}")
