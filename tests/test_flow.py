@@ -13,7 +13,7 @@ from typer.testing import CliRunner
 from pipeline.cli import app
 from pipeline.flow import STEPS
 
-pytestmark = [pytest.mark.sim, pytest.mark.slow]
+pytestmark = [pytest.mark.sim, pytest.mark.slow, pytest.mark.timeout(1800)]
 REPO = Path(__file__).parents[1]
 
 
@@ -51,6 +51,9 @@ def _review_everything(cfg_path: Path) -> int:
 def test_recover_run_stops_at_review_goes_on_after_it_and_then_has_nothing_to_do(tmp_path):
     smoke = yaml.safe_load((REPO / "configs" / "smoke.yaml").read_text())
     smoke["run"]["output_dir"] = str(tmp_path / "run")
+    # the smoke run, with one demo per scene and small LeRobot frames: the test is about the walk
+    smoke["release"] = {"recovery_demos": 1, "recovery_demo_tries": 2, "lerobot_image_size": 64,
+                        "lerobot_render_quality": "fast"}
     cfg = tmp_path / "smoke.yaml"
     cfg.write_text(yaml.safe_dump(smoke))
     run = tmp_path / "run"
