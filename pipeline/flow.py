@@ -152,12 +152,13 @@ def _lerobot_inputs(cfg: Config) -> str:
 
 def _review_gate(cfg: Config) -> tuple[int, str]:
     from pipeline.review import views
-    from pipeline.review.db import FINAL, SUPERSEDED, read_session
+    from pipeline.review.db import read_session
     from pipeline.review.server import engine_for
+    from pipeline.vocab import ItemStatus
 
     with read_session(engine_for(cfg)) as s:
         counts = views.counts(s)
-    waiting = {k: n for k, n in counts["by_status"].items() if k not in (FINAL, SUPERSEDED)}
+    waiting = {k: n for k, n in counts["by_status"].items() if k not in (ItemStatus.final, ItemStatus.superseded)}
     return sum(waiting.values()), f"of {counts['total']} queue items ({', '.join(f'{k} {n}' for k, n in sorted(waiting.items()))})"
 
 

@@ -39,6 +39,21 @@ _MODEL_DIR = "/dev/shm" if os.path.isdir("/dev/shm") else tempfile.gettempdir()
 Result = tuple[str, dict[str, str] | None, str | None]  # ticket, videos, error
 
 
+def sweep_orphaned_models(model_dir: str | Path = _MODEL_DIR) -> int:
+    """Remove model files left by workers that are gone (killed before their render process read
+    the queue): 300 MB each in shared memory, which an OOM kill would otherwise make worse."""
+    removed = 0
+    for p in Path(model_dir).glob("recover-render-*-*.mjb"):
+        try:
+            os.kill(int(p.name.split("-")[2]), 0)
+        except ProcessLookupError:
+            p.unlink(missing_ok=True)
+            removed += 1
+        except (ValueError, PermissionError):
+            continue  # not our name pattern, or a live process of another user
+    return removed
+
+
 def _serve(jobs, results) -> None:
     """The render process: load models, render and encode episodes, in order."""
     from pipeline.executors.base import die_with_parent
@@ -80,6 +95,7 @@ class RenderProcess:
     and imports, about 1 s, then overlap the build)."""
 
     def __init__(self):
+        sweep_orphaned_models()
         ctx = mp.get_context("spawn")  # never fork a process holding EGL/MuJoCo state
         self._jobs, self._results = ctx.Queue(), ctx.Queue()
         self._proc = ctx.Process(target=_serve, args=(self._jobs, self._results), daemon=True)

@@ -7,6 +7,8 @@ two runs of the same code."""
 
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 
@@ -113,3 +115,19 @@ def test_an_episode_whose_render_process_died_is_left_unmarked_redone_on_rerun_a
     # the rerun redoes the unmarked episode only, videos included
     assert run_shard(job, ctx) == 1
     assert done.is_done(first.unit_id) and (stage1 / first.rel_dir / "video_agentview.mp4").exists()
+
+
+def test_model_files_of_dead_workers_are_swept_and_live_ones_kept(tmp_path):
+    import subprocess
+
+    from pipeline.stage1.render_pool import sweep_orphaned_models
+
+    gone = subprocess.Popen(["true"])
+    gone.wait()
+    dead = tmp_path / f"recover-render-{gone.pid}-0.mjb"
+    live = tmp_path / f"recover-render-{os.getpid()}-0.mjb"
+    other = tmp_path / "recover-render-notapid-0.mjb"
+    for p in (dead, live, other):
+        p.write_bytes(b"x")
+    assert sweep_orphaned_models(tmp_path) == 1
+    assert not dead.exists() and live.exists() and other.exists()
