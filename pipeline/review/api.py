@@ -10,7 +10,7 @@ Outputs: a FastAPI app. Routes, one router per resource under `routes/` (all JSO
   media:        GET /api/items/{id}/evidence, /frames   GET /media/<path under the run folder> (file)
   GET / (the page)
 Invariants: every route but login and the page needs a user (`deps`), the OpenAPI docs too;
-an item's reviews stay hidden while they are being collected (`workflow.open_reviews`);
+an item's reviews stay hidden while they are being collected (`blindness`);
 writes through the cookie need the CSRF header; errors are `{"detail", "field"?, "current"?}`
 with 401/403/404/409/415/422; a request body that fails the schema is a 422 whose `field`
 names the bad field, and no error repeats a secret (a token field, a whole body, a long value).
