@@ -28,7 +28,8 @@ def db_url(cfg: Config) -> str:
 def settings(cfg: Config) -> QueueSettings:
     s = cfg.stage3
     return QueueSettings(required_reviews=s.reviews_per_item, time_tolerance_s=s.time_tolerance_s,
-                         lease_seconds=s.lease_seconds, control_hz=cfg.stage1.rollout.control_hz)
+                         lease_seconds=s.lease_seconds, control_hz=cfg.stage1.rollout.control_hz,
+                         max_leases=s.max_leases_per_person, lease_max_s=max(s.lease_max_seconds, s.lease_seconds))
 
 
 def engine_for(cfg: Config) -> Engine:

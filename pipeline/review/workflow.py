@@ -5,7 +5,9 @@ Inputs: a write session, the acting user, the item, the decision body.
 Invariants:
 - never more than K reviews: the review count rises by a conditional UPDATE
   (`n_reviews < required_reviews`), and the (item, reviewer) unique constraint backs it;
-- leases are advisory and expire; an expired lease holds nothing;
+- leases are advisory and expire; an expired lease holds nothing; a person holds at most
+  `max_leases` items at once, and renewing a lease never extends it past `lease_max_s` after
+  it was taken (an expired one is taken afresh, subject to room like anyone's);
 - a decision carries the version of the reviewer's own review it replaces (0 = none):
   anything else is stale (409); the same decision again (same idempotency key, or the
   same content after normalization, e.g. `fail_time_s: "5"` when it is 5) is answered
@@ -39,6 +41,8 @@ class QueueSettings:
     time_tolerance_s: float = 0.5
     lease_seconds: int = 900
     control_hz: int = 20
+    max_leases: int = 3  # items one person may hold at once (the page works on one)
+    lease_max_s: int = 3600  # a lease is never renewed past this long after it was taken
 
 
 def get_item(s: Session, item_id: int, lock: bool = False) -> Item:
@@ -101,13 +105,18 @@ def lease_item(s: Session, user: User, item: Item, cfg: QueueSettings) -> Lease:
         raise Stale(f"you already reviewed item {item.id}")
     blindness.refuse_write(s, user, item)
     lease = s.scalar(select(Lease).where(Lease.item_id == item.id, Lease.user_id == user.id))
-    if lease is None:
+    if lease is None or lease.expires_at <= t:
         if item.n_reviews + _active_leases(s, item.id, t, exclude_user=user.id) >= item.required_reviews:
             raise Stale(f"item {item.id} already has {item.required_reviews} reviewers")
-        lease = Lease(item_id=item.id, user_id=user.id, expires_at=t + cfg.lease_seconds)
-        s.add(lease)
+        held = s.scalar(select(func.count(Lease.id)).where(Lease.user_id == user.id, Lease.expires_at > t)) or 0
+        if held >= cfg.max_leases:
+            raise Stale(f"you already hold {held} items (at most {cfg.max_leases}); decide one of them first")
+        if lease is None:
+            lease = Lease(item_id=item.id, user_id=user.id)
+            s.add(lease)
+        lease.taken_at = t
         audit.record(s, user.name, "leased", item)
-    lease.expires_at = t + cfg.lease_seconds
+    lease.expires_at = min(t + cfg.lease_seconds, lease.taken_at + cfg.lease_max_s)
     s.flush()
     refresh_status(s, item, t)
     return lease
