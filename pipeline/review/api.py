@@ -108,7 +108,8 @@ def create_app(run_dir: str | Path, engine: Engine, settings: QueueSettings, ui_
                   lifespan=_lifespan)
     app.state.review = ServerContext(Path(run_dir).resolve(), engine, settings)
     app.add_exception_handler(RequestValidationError, _validation_error)
-    app.add_exception_handler(ReviewError, lambda _r, e: JSONResponse(status_code=e.status, content=e.body()))
+    app.add_exception_handler(ReviewError, lambda _r, e: JSONResponse(status_code=e.status, content=e.body(),
+                                                                          headers=e.headers()))
     app.add_middleware(RequestLimits)  # before routing, authentication and parsing
     app.add_middleware(SecurityHeaders)  # outermost: the limits' answers get the headers too
     for module in (session, queue, items, adjudication, admin, media):
