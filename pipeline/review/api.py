@@ -31,7 +31,7 @@ from sqlalchemy.engine import Engine
 
 from pipeline.review.deps import ServerContext
 from pipeline.review.errors import ReviewError
-from pipeline.review.limits import RequestLimits
+from pipeline.review.limits import Limits, RequestLimits
 from pipeline.review.routes import adjudication, admin, items, media, queue, session
 from pipeline.review.workflow import QueueSettings
 
@@ -102,7 +102,7 @@ class SecurityHeaders:
 
 
 def create_app(run_dir: str | Path, engine: Engine, settings: QueueSettings, ui_dir: Path = UI_DIR,
-               docs: bool = False) -> FastAPI:
+               docs: bool = False, limits: Limits = Limits()) -> FastAPI:
     # FastAPI's own docs routes answer anyone; ours (admin.docs_router) need a user
     app = FastAPI(title="libero-recover review", docs_url=None, redoc_url=None, openapi_url=None,
                   lifespan=_lifespan)
@@ -110,7 +110,8 @@ def create_app(run_dir: str | Path, engine: Engine, settings: QueueSettings, ui_
     app.add_exception_handler(RequestValidationError, _validation_error)
     app.add_exception_handler(ReviewError, lambda _r, e: JSONResponse(status_code=e.status, content=e.body(),
                                                                           headers=e.headers()))
-    app.add_middleware(RequestLimits)  # before routing, authentication and parsing
+    app.state.limits = limits  # the server's protocol takes its header limits from here (server.py)
+    app.add_middleware(RequestLimits, limits=limits)  # before routing, authentication and parsing
     app.add_middleware(SecurityHeaders)  # outermost: the limits' answers get the headers too
     for module in (session, queue, items, adjudication, admin, media):
         app.include_router(module.router)
