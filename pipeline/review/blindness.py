@@ -14,15 +14,16 @@ The rule:
 - whoever reads an episode's reviews is recorded (`reviews_read` audit event) and may no
   longer lease, take or write a review of any revision of that episode: a first decision
   or a change to one they made before;
-- statistics (`report.summary`, `views.progress`) count only reviews of closed items
-  (`closed`): agreement on an item still collecting says how its reviewers are voting.
+- statistics (`report.summary`, `views.progress`) count only reviews of closed items of
+  episodes none of whose revisions is collecting (`closed`): agreement on an item still
+  collecting says how its reviewers are voting.
 Export writes final items only, so it never shows a collecting item's reviews.
 """
 
 from __future__ import annotations
 
 from sqlalchemy import and_, exists, select
-from sqlalchemy.orm import Session
+from sqlalchemy.orm import Session, aliased
 
 from pipeline.review import audit
 from pipeline.review.db import Event, Item, Review, User
@@ -33,8 +34,10 @@ READ_REVIEWS = "reviews_read"  # audit event: this user has seen the reviews of 
 
 
 def closed():
-    """SQL condition: the item's reviews are complete (they may be counted and shown)."""
-    return Item.status.not_in(COLLECTING)
+    """SQL condition: the item's reviews may be counted and shown: it is not collecting, nor is
+    any other revision of its episode."""
+    other = aliased(Item)
+    return Item.status.not_in(COLLECTING) & ~exists().where(other.key == Item.key, other.status.in_(COLLECTING))
 
 
 def has_read(user: User):
@@ -48,8 +51,8 @@ def refuse_read(s: Session, user: User, item: Item, whole_episode: bool) -> None
     collecting = s.scalar(select(Item.revision).where(Item.key == item.key, Item.status.in_(COLLECTING))
                           .order_by(Item.revision).limit(1))
     if collecting is not None:
-        what = "its" if collecting == item.revision else f"revision {collecting} of its episode's"
-        raise Forbidden(f"item {item.id}: {what} reviews are still being collected; they stay hidden until then")
+        which = "its reviews" if collecting == item.revision else f"the reviews of its episode's revision {collecting}"
+        raise Forbidden(f"item {item.id}: {which} are still being collected; they stay hidden until then")
     read = select(Item.id).where(Item.key == item.key) if whole_episode else [item.id]
     mine = s.scalar(select(Item.id).join(Review, Review.item_id == Item.id)
                     .where(Item.id.in_(read), Review.reviewer_id == user.id).limit(1))

@@ -149,6 +149,11 @@ def test_the_status_counts_no_agreement_of_items_still_collecting(server, people
     assert accept(cat, items[0], key="c").status_code == 200  # the third review closes it
     agreement = dan.get("/api/status").json()["agreement"]
     assert agreement["items"] == 1 and agreement["failure_category"]["percent_agreement"] == 0.0
+    for who in (ann, bob, cat):  # a second item, final: all three agree
+        assert accept(who, items[1], key="f").status_code == 200
+    assert dan.get("/api/status").json()["agreement"]["items"] == 2
+    _new_revision(engine, items[1])  # its episode collects again: its reviews count nowhere until that closes
+    assert dan.get("/api/status").json()["agreement"]["items"] == 1
 
 
 def test_an_admin_who_reviewed_an_item_reads_none_of_its_other_decisions(server, people, items):
