@@ -378,6 +378,11 @@ class ReleaseLayout:
     def quarantine_log(self) -> Path:
         return self.build_dir / QUARANTINE_LOG
 
+    @property
+    def verify_dir(self) -> Path:
+        """`recover verify`'s done markers, one per checked scene (`_done/`)."""
+        return self.build_dir / "verify"
+
     @staticmethod
     def scene_base(key: str, step: int) -> str:
         """Release-relative stem of a scene's files: `<scene_rel>/step_<NNNN>`."""
