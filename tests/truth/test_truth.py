@@ -88,7 +88,9 @@ def test_the_openai_backend_goes_through_bench_localize_over_loopback(truth_run,
             "backend": "openai", "language": "en",
             "openai": {"base_url": srv.base_url, "model": "ok", "max_retries": 0}}}})
         report = bench(cfg, "openai", tmp_path / "bench")
-    assert len(srv.seen) == 4  # localize, then characterize, per episode
+        assert len(srv.seen) == 4  # localize, then characterize, per episode
+        again = bench(cfg, "openai", tmp_path / "bench")  # the predictions are the episodes' done markers
+    assert len(srv.seen) == 4 and again["episodes"] == report["episodes"]
     by_key = {r["key"]: r for r in report["episodes"]}
     assert by_key[miss.key]["error_s"] == pytest.approx(2.0, abs=0.06)
     assert report["characterized"] == 2 and by_key[miss.key]["pred_category"] == "grasp_failure"
