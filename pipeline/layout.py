@@ -257,6 +257,11 @@ class Stage2Layout:
     def vlm(self, rec: EpisodeRecord) -> Path:
         return self._rel("vlm", rec, ".json")
 
+    @property
+    def vlm_dir(self) -> Path:
+        """The VLM step's answers, and its done markers (`_done/`)."""
+        return self.root / "vlm"
+
     def abs(self, rel: Path) -> Path:
         return self.root / rel
 
