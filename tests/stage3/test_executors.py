@@ -9,6 +9,7 @@ import json
 import pickle
 from pathlib import Path
 
+import pytest
 from rich.console import Console
 from sqlalchemy import select
 
@@ -21,6 +22,9 @@ from pipeline.stage3.run import Stage3
 from tests.review.sample_run import SUITE, TASK, build
 
 
+REPO = Path(__file__).resolve().parents[2]
+
+
 def _stage3(tmp_path: Path, kind: str) -> Path:
     run = tmp_path / kind
     build(run, n_episodes=4, n_quarantined=1, wrist=False)
@@ -31,7 +35,8 @@ def _stage3(tmp_path: Path, kind: str) -> Path:
     stage = pickle.loads(pickle.dumps(Stage3(cfg, batch_size=2)))
     units = stage.units(cfg)
     assert len(stage.shards(units, 2)) == 3  # more shards than workers: both workers take some
-    stats = Runner(make_executor(cfg.executor), console=Console(file=io.StringIO())).run(stage, cfg)
+    executor = make_executor(cfg.executor, worker_env={"PYTHONPATH": str(REPO)})  # Ray workers import `pipeline`
+    stats = Runner(executor, console=Console(file=io.StringIO())).run(stage, cfg)
     assert stats.ran == 5 and not stats.set_aside and not stats.report.retried
     return run
 
@@ -54,3 +59,9 @@ def test_stage3_pickles_and_two_local_workers_fill_the_queue_as_inline_does(tmp_
     assert len(inline["items"]) == 5 and sum(not i[2] for i in inline["items"].values()) == 3
     assert len(inline["markers"]) == 5
     assert local == inline
+
+
+@pytest.mark.slow
+@pytest.mark.xdist_group("ray")  # one local Ray instance at a time (tests/executors/test_ray.py)
+def test_stage3_on_two_ray_workers_fills_the_queue_as_inline_does(tmp_path):
+    assert _outcome(_stage3(tmp_path, "ray")) == _outcome(_stage3(tmp_path, "inline"))
