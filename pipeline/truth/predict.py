@@ -80,10 +80,14 @@ def _characterize(characterizer: Characterizer, out: dict[str, Prediction], locs
 
 def labelers_code() -> str:
     """A hash of the source the predictions depend on beyond the config (rules, prompts' code)."""
-    root = Path(__file__).resolve().parents[1]
+    import pipeline.evidence
+    import pipeline.labelers
+    import pipeline.stage2.phases
+
+    labelers = Path(pipeline.labelers.__file__).parent
     h = hashlib.sha256()
-    for p in sorted([*(root / "labelers").rglob("*.py"), root / "evidence.py", root / "stage2" / "phases.py"]):
-        h.update(p.relative_to(root).as_posix().encode() + b"\0" + p.read_bytes())
+    for p in [*sorted(labelers.rglob("*.py")), Path(pipeline.evidence.__file__), Path(pipeline.stage2.phases.__file__)]:
+        h.update(p.name.encode() + b"\0" + p.read_bytes())
     return h.hexdigest()[:16]
 
 
