@@ -8,7 +8,7 @@ Every localizer and characterizer is the one stages 2 and 3 use, built by
 - simstate: the simstate localizer on the evidence for the onset (the stage-2 evidence file
   when there is one, else measured from the logged states on the worker's environment;
   nothing is written to stage2/), then the simstate characterizer for level and category.
-  Episodes of one task share a shard (one environment build).
+  Episodes of one task share a shard, never split (one environment build per task).
 - openai | transformers: one model is asked to localize, then to characterize at its own
   onset, `BATCH` episodes per request round; every episode runs in one shard, so one client
   (its `max_in_flight`) or one loaded model serves them all. An unusable answer is a miss,
@@ -154,7 +154,10 @@ class BenchStage(Stage[EpisodeRecord]):
     def shards(self, units: list[EpisodeRecord], workers: int) -> list[tuple[EpisodeRecord, ...]]:
         if self.vlm:  # one client or one loaded model for every episode
             return [tuple(units)] if units else []
-        return super().shards(units, workers)
+        by_task: dict[tuple[str, str], list[EpisodeRecord]] = {}
+        for rec in units:  # one shard per task, never split (as stage 2): measuring evidence is cheap, a build is not
+            by_task.setdefault(self.group(rec), []).append(rec)
+        return [tuple(recs) for _, recs in sorted(by_task.items())]
 
     def labelers(self, ctx: WorkerContext) -> _Labelers:
         return ctx.helper(f"bench {self.localizer} {self.cfg.out}", lambda: _Labelers(self.cfg, self.localizer))
