@@ -181,3 +181,15 @@ def test_a_rerun_takes_unchanged_scenes_from_their_markers_and_checks_a_changed_
         assert any(m.startswith(f"{state}: SHA-256") for m in problems)
     finally:
         state.write_bytes(original)
+
+
+def test_the_cli_runs_on_the_configs_executor(checked, tmp_path):
+    import yaml
+    from typer.testing import CliRunner
+
+    from pipeline.cli import app
+
+    cfg = tmp_path / "verify.yaml"
+    cfg.write_text(yaml.safe_dump({"run": {"output_dir": str(tmp_path)}, "executor": {"kind": "inline"}}))
+    res = CliRunner().invoke(app, ["verify", str(checked[0]), "--config", str(cfg)])
+    assert res.exit_code == 1 and "1/8 scenes pass" in res.output, res.output
