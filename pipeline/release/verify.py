@@ -154,8 +154,8 @@ class VerifyStage(Stage[ScenarioRow]):
         for rel, _ in row.files():
             path = self.directory / rel
             files.update(f"{rel}={sha256_file(path) if path.is_file() else 'missing'};".encode())
-        # the folder too: a report names its files by their paths
-        return {"at": str(self.directory.resolve()), "row": hashlib.sha256(row.model_dump_json().encode()).hexdigest()[:16],
+        # the folder as given too: a report names its files by these paths
+        return {"at": str(self.directory), "row": hashlib.sha256(row.model_dump_json().encode()).hexdigest()[:16],
                 "files": files.hexdigest()[:16], "verify": VERIFY_VERSION,
                 "settle": [self.cfg.settle_check_steps, self.cfg.settle_threshold_m]}
 
