@@ -116,7 +116,7 @@ def verify(directory: Path = typer.Argument(..., help="a released scenario set")
         from pipeline.executors import make_executor
 
         executor = make_executor(cfg.executor)
-    code = _call("pipeline.release.verify:main", directory, cfg.release if cfg else None, executor)
+    code = _call("pipeline.release.verify:main", directory, cfg.release if cfg else None, executor=executor)
     raise typer.Exit(int(code or 0))
 
 

@@ -232,7 +232,7 @@ def print_report(reports: list[SceneReport], set_problems: list[str], console: C
     console.print(f"[{colour}]{len(reports) - bad}/{len(reports)} scenes pass; {len(problems)} problem(s)[/{colour}]")
 
 
-def main(directory: str | Path, cfg: ReleaseConfig | None = None, executor: Executor | None = None) -> int:
+def main(directory: str | Path, cfg: ReleaseConfig | None = None, *, executor: Executor | None = None) -> int:
     console = Console()
     reports, set_problems = verify_release(Path(directory), cfg, executor, console)
     print_report(reports, set_problems, console)
