@@ -126,10 +126,12 @@ env = OffScreenRenderEnv(bddl_file_name="step_NNNN.bddl")  # the scene's own BDD
 restore(env, np.load("step_NNNN_sim_state.npy"), hold_grasp=True)
 ```
 
-Actions are stored at the precision they were executed with: each episode folder
-(stage-1 rollouts, recovery demos) has `actions.npy`, (steps, 7) float64, the values the
-simulator stepped; the `action` column of `steps.parquet` and of the LeRobot datasets is
-the same values rounded to float32, which do not replay bit for bit. A recovery demo
+Actions are stored at the precision they were executed with (the simulator stepped float64
+actions; rounding them before stepping would have changed the rollouts): each episode folder
+(stage-1 rollouts, recovery demos) has `actions.npy`, (steps, 7) float64, and the LeRobot
+datasets have `action_float64` beside the float32 `action`. The float32 `action` (also in
+`steps.parquet`) is the same values rounded: train on it, but replay the float64 ones; the
+rounded ones drift from the recorded states after the first step. A recovery demo
 replays from its scene: `restore(env, scene_state, hold_grasp=True)`, then
 `env.step(a)` for each row of `actions.npy`; the states equal the demo's `states.npy` bit
 for bit and `env.check_success()` first holds at its last step. `recover demos` keeps

@@ -11,8 +11,10 @@ category), each a LeRobot v2.1 dataset (`pipeline.release.lerobot_format`). Fram
 logged states at 20 Hz (every control step), third-person and wrist cameras, right side
 up, at `release.lerobot_render_quality` (standard: LIBERO's look); state = eef position, eef
 axis-angle, the two gripper finger positions (8-D, as in LIBERO's LeRobot datasets); action =
-the 7-D command (float32, as LeRobot's LIBERO datasets; the float64 actions the simulator
-stepped stay in each source episode's `actions.npy`). Before an episode is written its
+the 7-D command, float32 as in LIBERO's LeRobot datasets, and beside it `action_float64`, the
+same command exactly as the simulator stepped it (the source episode's `actions.npy`): only
+those replay bit for bit. `episodes.jsonl` says where each episode began (`init_state` and
+`settle_steps` of a rollout or history, `scene_id` of a demo). Before an episode is written its
 actions are replayed in plain LIBERO from where it began (`pipeline.release.replay`:
 a rollout or history from its init state and stage 1's settle, a demo from its scene) and
 must give its logged states bit for bit, or the episode is set aside.
@@ -113,6 +115,12 @@ def write_video(path: Path, frames: np.ndarray) -> None:
     write_with(path, encode)
 
 
+def start_meta(e) -> dict:
+    """Where a stage-1 episode began (episodes.jsonl): LIBERO's init state `init_state` of its
+    task, restored as the card says, then `settle_steps` actions [0, 0, 0, 0, 0, 0, -1]."""
+    return {"init_state": e.init_state, "settle_steps": e.settle_steps}
+
+
 def rollout_episodes(cfg: Config) -> list[ExportEpisode]:
     stage1 = RunLayout.of(cfg).stage1
     out = []
@@ -120,7 +128,8 @@ def rollout_episodes(cfg: Config) -> list[ExportEpisode]:
         if cfg.release.lerobot_episodes == "failures" and e.success:
             continue
         out.append(ExportEpisode(e.key, e.suite, e.task, e.instruction, stage1.episode(e).dir, e.steps,
-                                 start=ReplayStart(init_state=e.init_state, settle_steps=e.settle_steps)))
+                                 meta=start_meta(e), start=ReplayStart(init_state=e.init_state,
+                                                                       settle_steps=e.settle_steps)))
     return sorted(out, key=lambda x: x.key)
 
 
@@ -136,7 +145,7 @@ def history_episodes(cfg: Config, manifest: Path) -> list[ExportEpisode]:
         e = eps.get(episode_key(r.suite, r.task, r.episode_id))
         if e is not None and r.fail_step >= 1:
             out.append(ExportEpisode(f"{e.key}@{r.step}", r.suite, r.task, r.instruction, stage1.episode(e).dir,
-                                     min(r.fail_step, e.steps),
+                                     min(r.fail_step, e.steps), meta=start_meta(e),
                                      start=ReplayStart(init_state=e.init_state, settle_steps=e.settle_steps)))
     return sorted(out, key=lambda x: x.key)
 
@@ -171,7 +180,7 @@ def export_episode(env: SimEnv, ep: ExportEpisode, i: int, start: int, task_inde
         if problems:
             raise ValueError("; ".join(problems))
     states = np.load(files.states)[: ep.length]
-    actions = np.array(pq.read_table(files.steps).column("action").to_pylist())[: ep.length]
+    actions = np.load(files.actions, allow_pickle=False)[: ep.length]  # float64, as stepped
     robot, frames = render_episode(env, states, size, quality)
     table = fmt.frame_table(robot, actions, i, start, task_index)
     write_with(root / fmt.data_path(i), lambda p: pq.write_table(table, p))
