@@ -107,16 +107,19 @@ def release(config: Path = CONFIG, dry_run: bool = DRY) -> None:
 @app.command()
 def verify(directory: Path = typer.Argument(..., help="a released scenario set"),
            config: Path = typer.Option(None, "--config", "-c",
-                                       help="run config: its release checks and executor (default: built-in, inline)")
-           ) -> None:
-    """Check a scenario set: BDDL, states, restore, goal, settledness, checksums."""
+                                       help="run config: its release checks and executor (default: built-in, inline)"),
+           replay: bool = typer.Option(False, "--replay", help="also replay every recovery demo in plain LIBERO"),
+           demos: Path = typer.Option(None, "--demos", help="the recovery demos folder (default: recoveries/ "
+                                                            "beside the release)")) -> None:
+    """Check a scenario set: BDDL, states, restore, goal, settledness, checksums (--replay: demos)."""
     cfg = _load(config) if config is not None else None
     executor = None
     if cfg is not None:
         from pipeline.executors import make_executor
 
         executor = make_executor(cfg.executor)
-    code = _call("pipeline.release.verify:main", directory, cfg.release if cfg else None, executor=executor)
+    code = _call("pipeline.release.verify:main", directory, cfg.release if cfg else None, replay, demos,
+                 executor=executor)
     raise typer.Exit(int(code or 0))
 
 

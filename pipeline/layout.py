@@ -165,6 +165,11 @@ class EpisodeFiles:
         return self.dir / "states.npy"
 
     @property
+    def actions(self) -> Path:
+        """(steps, 7) float64: the actions exactly as stepped (steps.parquet rounds them)."""
+        return self.dir / "actions.npy"
+
+    @property
     def steps(self) -> Path:
         return self.dir / "steps.parquet"
 

@@ -101,7 +101,7 @@ def test_a_key_without_three_parts_is_refused_by_name():
 # must not appear as a string at all (an f-string's literal parts included)
 FOLDERS = {"stage1", "stage2", "stage3", "release", "eval", "bench", "episodes", "evidence", "localizations",
            "quarantine", "characterizations", "annotations", "reviewed_scenes", "trials", "vlm", "errors", "scenes"}
-FILES = {"episodes.parquet", "summary.json", "states.npy", "steps.parquet", "frames.parquet", "truth.parquet",
+FILES = {"episodes.parquet", "summary.json", "states.npy", "actions.npy", "steps.parquet", "frames.parquet", "truth.parquet",
          "scenarios.parquet", "review.sqlite", "review_status.json", "annotations.parquet", "localizations.parquet",
          "agreement.json", "agreement.png", "metrics.json", "report.md", "quarantine.jsonl", "config.resolved.yaml",
          "SHA256SUMS", "README.md", "_build"}

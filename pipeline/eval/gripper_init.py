@@ -32,8 +32,8 @@ class GripperInit:
 def init_gripper(env, condition: str, steps: int) -> GripperInit:
     if condition not in COMMAND:
         raise ValueError(f"gripper condition must be one of {sorted(COMMAND)}, got {condition!r}")
-    # a restore leaves the controller anchored to the pre-restore pose; anchor it here first,
-    # or the zero-delta steps would pull the arm back toward that stale goal
+    # the restore anchors the controller to the restored pose (pipeline.sim.restore); anchor
+    # again in case the scene changed since, or the zero-delta steps would pull toward a stale goal
     env.reanchor_controller()
     start, _ = env.eef_pose()
     env.hold_gripper(closed=condition == "closed")

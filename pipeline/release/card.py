@@ -94,6 +94,53 @@ def _uncertified(rows: list[ScenarioRow]) -> str:
             + _table(["scene", "level", "category", "reason"], scenes) + "\n")
 
 
+def restore_source() -> str:
+    """The one restore's source (`pipeline.sim.restore.restore`), quoted whole by the card."""
+    import inspect
+
+    from pipeline.sim.restore import restore
+
+    return inspect.getsource(restore).rstrip()
+
+
+def restore_section() -> str:
+    """How to restore a scene and replay what was recorded from it, in plain LIBERO."""
+    return f"""Restore a scene in plain LIBERO with this function, the one the project itself uses
+(`pipeline/sim/restore.py`: stage 1, `recover eval`, certification, the recovery demos, the
+LeRobot export and `recover verify --replay` all start from it). LIBERO places fixtures
+(cabinets, stoves, racks) by sampling from the global `np.random` at every reset, and fixture
+poses are not in the flattened state: these scenes were recorded with that sampler seeded
+with 0. The lines after `set_init_state` set what the flattened state leaves out: the arm
+controller's cached pose (it would otherwise anchor the first action to the pose before the
+restore), the Panda gripper's command ramp and MuJoCo's solver warm start.
+
+```python
+import numpy as np
+from libero.libero.envs import OffScreenRenderEnv  # or ControlEnv (no cameras)
+
+
+{restore_source()}
+
+
+env = OffScreenRenderEnv(bddl_file_name="step_NNNN.bddl")  # the scene's own BDDL
+restore(env, np.load("step_NNNN_sim_state.npy"), hold_grasp=True)
+```
+
+Actions are stored at the precision they were executed with (the simulator stepped float64
+actions; rounding them before stepping would have changed the rollouts): each episode folder
+(stage-1 rollouts, recovery demos) has `actions.npy`, (steps, 7) float64, and the LeRobot
+datasets have `action_float64` beside the float32 `action`. The float32 `action` (also in
+`steps.parquet`) is the same values rounded: train on it, but replay the float64 ones; the
+rounded ones drift from the recorded states after the first step. A recovery demo
+replays from its scene: `restore(env, scene_state, hold_grasp=True)`, then
+`env.step(a)` for each row of `actions.npy`; the states equal the demo's `states.npy` bit
+for bit and `env.check_success()` first holds at its last step. `recover demos` keeps
+a demo only if it replays so, and `recover verify --replay` checks every demo again. A
+stage-1 rollout replays from its LIBERO init state: `restore(env, init_states[i])`, then
+`settle_steps` actions `[0, 0, 0, 0, 0, 0, -1]`, then `actions.npy` (the LeRobot export
+checks this for every exported rollout and pre-failure history)."""
+
+
 def render_card(rows: list[ScenarioRow], cfg: Config, prompt_hashes: dict[str, list[str]], reviewers: int) -> str:
     suites = sorted({r.suite for r in rows})
     by_sl = Counter((r.suite, r.level) for r in rows)
@@ -116,20 +163,7 @@ the SHA-256 of each file; `recover verify <this folder>` checks a copy.
 
 ## Restoring a scene
 
-LIBERO places fixtures (cabinets, stoves, racks) by sampling from the global `np.random`
-at every reset, and fixture poses are not in the flattened state. These scenes were
-recorded with that sampler seeded with 0, so restore them the same way:
-
-```python
-env = OffScreenRenderEnv(bddl_file_name="step_NNNN.bddl")  # LIBERO's own wrapper
-np.random.seed(0)
-env.reset()
-env.set_init_state(np.load("step_NNNN_sim_state.npy"))
-```
-
-The Panda gripper's command ramp is not in the state either: to keep a restored grasp,
-send a few close commands (or open ones) before the policy acts, as `recover eval` does.
-
+{restore_section()}
 ## Scenes per suite and recovery level ({len(rows)} scenes)
 
 {_table(["suite", *LEVELS, "total"], level_rows)}

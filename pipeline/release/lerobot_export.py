@@ -11,7 +11,13 @@ category), each a LeRobot v2.1 dataset (`pipeline.release.lerobot_format`). Fram
 logged states at 20 Hz (every control step), third-person and wrist cameras, right side
 up, at `release.lerobot_render_quality` (standard: LIBERO's look); state = eef position, eef
 axis-angle, the two gripper finger positions (8-D, as in LIBERO's LeRobot datasets); action =
-the 7-D command.
+the 7-D command, float32 as in LIBERO's LeRobot datasets, and beside it `action_float64`, the
+same command exactly as the simulator stepped it (the source episode's `actions.npy`): only
+those replay bit for bit. `episodes.jsonl` says where each episode began (`init_state` and
+`settle_steps` of a rollout or history, `scene_id` of a demo). Before an episode is written its
+actions are replayed in plain LIBERO from where it began (`pipeline.release.replay`:
+a rollout or history from its init state and stage 1's settle, a demo from its scene) and
+must give its logged states bit for bit, or the episode is set aside.
 
 Episodes are rendered in parallel as a `Stage` (pipeline/runner/) on the run's executor: one
 unit per episode, the episodes of one simulator model (suite, task, BDDL content) share a
@@ -40,6 +46,7 @@ from pipeline.layout import EpisodeFiles, RunLayout, episode_key
 from pipeline.records import read_episodes
 from pipeline.release import lerobot_format as fmt
 from pipeline.release.manifest import MANIFEST_NAME
+from pipeline.release.replay import ReplayStart, check_exported
 from pipeline.release.scene_physics import scene_task
 from pipeline.runner import Stage, UnitResult, WorkerContext
 from pipeline.sim import SimEnv, TaskSpec, get_task
@@ -58,6 +65,7 @@ class ExportEpisode:
     length: int  # frames to export (states[:length], actions[:length])
     bddl: Path | None = None  # the scene's own BDDL (recovery demos); None: the task's
     meta: dict = field(default_factory=dict)  # extra episodes.jsonl fields
+    start: ReplayStart | None = None  # where it began: its actions must replay from there
 
     def spec(self) -> TaskSpec:
         """The task whose model renders it (with the scene's own BDDL where it has one)."""
@@ -107,13 +115,21 @@ def write_video(path: Path, frames: np.ndarray) -> None:
     write_with(path, encode)
 
 
+def start_meta(e) -> dict:
+    """Where a stage-1 episode began (episodes.jsonl): LIBERO's init state `init_state` of its
+    task, restored as the card says, then `settle_steps` actions [0, 0, 0, 0, 0, 0, -1]."""
+    return {"init_state": e.init_state, "settle_steps": e.settle_steps}
+
+
 def rollout_episodes(cfg: Config) -> list[ExportEpisode]:
     stage1 = RunLayout.of(cfg).stage1
     out = []
     for e in read_episodes(stage1.manifest):
         if cfg.release.lerobot_episodes == "failures" and e.success:
             continue
-        out.append(ExportEpisode(e.key, e.suite, e.task, e.instruction, stage1.episode(e).dir, e.steps))
+        out.append(ExportEpisode(e.key, e.suite, e.task, e.instruction, stage1.episode(e).dir, e.steps,
+                                 meta=start_meta(e), start=ReplayStart(init_state=e.init_state,
+                                                                       settle_steps=e.settle_steps)))
     return sorted(out, key=lambda x: x.key)
 
 
@@ -129,7 +145,8 @@ def history_episodes(cfg: Config, manifest: Path) -> list[ExportEpisode]:
         e = eps.get(episode_key(r.suite, r.task, r.episode_id))
         if e is not None and r.fail_step >= 1:
             out.append(ExportEpisode(f"{e.key}@{r.step}", r.suite, r.task, r.instruction, stage1.episode(e).dir,
-                                     min(r.fail_step, e.steps)))
+                                     min(r.fail_step, e.steps), meta=start_meta(e),
+                                     start=ReplayStart(init_state=e.init_state, settle_steps=e.settle_steps)))
     return sorted(out, key=lambda x: x.key)
 
 
@@ -141,14 +158,16 @@ def recovery_episodes(cfg: Config, release: Path) -> list[ExportEpisode]:
     root = recoveries.root
     if not recoveries.demos.is_file() or not (release / MANIFEST_NAME).is_file():
         return []
-    bddl = {scene_id(r): release / r.bddl_path for r in read_manifest(release / MANIFEST_NAME)}
+    rows = {scene_id(r): r for r in read_manifest(release / MANIFEST_NAME)}
+    bddl = {sid: release / r.bddl_path for sid, r in rows.items()}
     out = []
     for d in read_demos(recoveries.demos):
         if d.scene_id not in bddl:  # a demo of a scene no longer released
             continue
         out.append(ExportEpisode(f"{d.scene_id}/demo_{d.demo_index}", d.suite, d.task, d.instruction, root / d.path,
                                  d.steps, bddl[d.scene_id],
-                                 {"scene_id": d.scene_id, "level": d.level, "category": d.category}))
+                                 {"scene_id": d.scene_id, "level": d.level, "category": d.category},
+                                 ReplayStart(scene_state=release / rows[d.scene_id].state_path)))
     return sorted(out, key=lambda x: x.key)
 
 
@@ -156,8 +175,12 @@ def export_episode(env: SimEnv, ep: ExportEpisode, i: int, start: int, task_inde
                    size: int, quality: str = "standard") -> dict:
     """Render and write episode `i`; return its episodes.jsonl/episodes_stats.jsonl entry."""
     files = EpisodeFiles(ep.folder)
+    if ep.start is not None:  # what is exported is the rollout it claims to be, or nothing
+        problems = check_exported(env, ep.start, ep.folder, ep.length)
+        if problems:
+            raise ValueError("; ".join(problems))
     states = np.load(files.states)[: ep.length]
-    actions = np.array(pq.read_table(files.steps).column("action").to_pylist())[: ep.length]
+    actions = np.load(files.actions, allow_pickle=False)[: ep.length]  # float64, as stepped
     robot, frames = render_episode(env, states, size, quality)
     table = fmt.frame_table(robot, actions, i, start, task_index)
     write_with(root / fmt.data_path(i), lambda p: pq.write_table(table, p))

@@ -35,6 +35,7 @@ VIDEO_PATH = "videos/chunk-{episode_chunk:03d}/{video_key}/episode_{episode_inde
 VIDEO_KEYS = {"observation.images.image": "agentview", "observation.images.wrist_image": "robot0_eye_in_hand"}
 STATE_NAMES = ["x", "y", "z", "axis_angle1", "axis_angle2", "axis_angle3", "gripper_left", "gripper_right"]
 ACTION_NAMES = ["dx", "dy", "dz", "droll", "dpitch", "dyaw", "gripper"]
+ACTION_F64 = "action_float64"
 
 
 def data_path(ep: int) -> str:
@@ -52,6 +53,8 @@ def features(size: int) -> dict:
            for k in VIDEO_KEYS}
     out["observation.state"] = {"dtype": "float32", "shape": [8], "names": STATE_NAMES}
     out["action"] = {"dtype": "float32", "shape": [7], "names": ACTION_NAMES}
+    # the same actions exactly as the simulator stepped them: these replay bit for bit
+    out[ACTION_F64] = {"dtype": "float64", "shape": [7], "names": ACTION_NAMES}
     for k in ("timestamp",):
         out[k] = {"dtype": "float32", "shape": [1], "names": None}
     for k in ("frame_index", "episode_index", "index", "task_index"):
@@ -66,6 +69,7 @@ class LeRobotFrame(BaseModel):
 
     observation_state: Annotated[list[F32], Len(8, 8)] = Field(alias="observation.state")
     action: Annotated[list[F32], Len(7, 7)]
+    action_float64: Annotated[list[float], Len(7, 7)]  # `action` before rounding: what was stepped
     timestamp: F32
     frame_index: I64
     episode_index: I64
@@ -78,6 +82,7 @@ FRAME_SCHEMA = arrow_schema(LeRobotFrame, metadata=None, nullable=True)
 
 
 def frame_table(states: np.ndarray, actions: np.ndarray, ep: int, start: int, task_index: int) -> pa.Table:
+    """`actions`: float64 as stepped; `action` holds them rounded to float32, `action_float64` exactly."""
     n = len(states)
 
     def fixed(a: np.ndarray) -> pa.FixedSizeListArray:
@@ -87,6 +92,8 @@ def frame_table(states: np.ndarray, actions: np.ndarray, ep: int, start: int, ta
     return pa.table({
         "observation.state": fixed(states),
         "action": fixed(actions),
+        ACTION_F64: pa.FixedSizeListArray.from_arrays(pa.array(np.asarray(actions, dtype=np.float64).reshape(-1),
+                                                               pa.float64()), 7),
         "timestamp": pa.array(np.arange(n, dtype=np.float32) / FPS, pa.float32()),
         "frame_index": pa.array(np.arange(n), pa.int64()),
         "episode_index": pa.array(np.full(n, ep), pa.int64()),

@@ -5,15 +5,20 @@ Inputs: the release manifest (`<release>/scenarios.parquet`, its scene files) an
 `certify_horizon`), `cfg.stage1.video` for the videos.
 Outputs under `<run>/recoveries/` (`RunLayout.recoveries`):
     episodes/<suite>/<task>/<episode_id>/step_<NNNN>/demo_<k>/
-        states.npy, steps.parquet          as stage 1 writes them (`EpisodeRecorder`)
+        states.npy, actions.npy, steps.parquet  as stage 1 writes them (`EpisodeRecorder`)
         video_<camera>.mp4, frames.parquet as stage 1 renders them (its render process)
     demos.parquet      one row per demo (`DemoRecord`: scene id, level, category, seed, ...)
-    scenes.jsonl       one line per scene: tries, demos, why the other tries failed
+    scenes.jsonl       one line per scene: tries, demos, why the other tries failed,
+                       `unreplayable` (successful tries dropped for not replaying)
     _done/<scene>.done the scene's line, written after all its demos' videos are back
 Try k of a scene runs the recovery expert with seed `demo_seed(run seed, scene id, k)` and
 the configured variation (approach and speed); a try that does not reach the goal is no
-demo: it is counted (with the expert's reason) and its files are not kept. Tries stop at
-`recovery_demos` successes or `recovery_demo_tries` tries. The scenes run as a Stage
+demo: it is counted (with the expert's reason) and its files are not kept. A successful try
+is kept only if it replays: its float64 actions, stepped by robosuite's own `env.step` from
+the dataset card's restore (`pipeline.release.replay.check_demo`), must give its states bit
+for bit and reach the goal at its last step; a try that does not is dropped and counted
+(`unreplayable` in scenes.jsonl; expected 0). Tries stop at `recovery_demos` kept demos or
+`recovery_demo_tries` tries. The scenes run as a Stage
 (`DemoStage`, one unit per scene, stage 1's render-overlap stream: `pipeline.stage1.overlap`)
 by the `Runner` on the configured executor; resumable per scene; a scene whose environment,
 state or videos fail is set aside with the reason (`errors/<scene>.txt`) and the rest goes on.
@@ -47,6 +52,7 @@ from pipeline.layout import RecoveriesLayout, RunLayout, episode_key, scene_unit
 from pipeline.layout import scene_id as layout_scene_id
 from pipeline.release.experts import attempt, recovery_expert
 from pipeline.release.manifest import MANIFEST_NAME, ScenarioRow, read_manifest
+from pipeline.release.replay import check_demo
 from pipeline.release.scene_physics import restore_scene, scene_task
 from pipeline.runner import UnitResult, WorkerContext
 from pipeline.stage1.overlap import Complete, RenderOverlapStage, Submit
@@ -150,7 +156,7 @@ def _record_scene(env, row: ScenarioRow, state: np.ndarray, cfg: Config, root: P
     if base.exists():  # leftovers of a scene killed before its marker
         shutil.rmtree(base)
     fails: Counter[str] = Counter()
-    demos = tries = 0
+    demos = tries = unreplayable = 0
     while demos < rc.recovery_demos and tries < rc.recovery_demo_tries:
         seed = demo_seed(cfg.run.seed, sid, tries)
         t0 = time.perf_counter()
@@ -166,6 +172,11 @@ def _record_scene(env, row: ScenarioRow, state: np.ndarray, cfg: Config, root: P
             continue
         folder = base / f"demo_{demos}"
         rec.write(folder)
+        _, problems = check_demo(env, state, folder, out.steps)  # plain LIBERO, from the card's restore
+        if problems:
+            unreplayable += 1
+            shutil.rmtree(folder)
+            continue
         record = DemoRecord(
             scene_id=sid, suite=row.suite, task=row.task, instruction=row.instruction, episode_id=row.episode_id,
             step=row.step, level=row.level, category=row.category, demo_index=demos, try_index=tries - 1,
@@ -174,7 +185,7 @@ def _record_scene(env, row: ScenarioRow, state: np.ndarray, cfg: Config, root: P
         submit(record, rec.states_array())
         demos += 1
     return {"scene_id": sid, "level": row.level, "category": row.category, "tries": tries, "demos": demos,
-            "failed": dict(sorted(fails.items()))}
+            "unreplayable": unreplayable, "failed": dict(sorted(fails.items()))}
 
 
 @dataclass
@@ -272,11 +283,15 @@ def run(cfg: Config, console: Console | None = None, executor: Executor | None =
     summaries = list(finished(stage, rows).values())
     demos = [DemoRecord.model_validate(d) for s in summaries for d in s.get("records", [])]
     write_demos(RecoveriesLayout(root).demos, demos)
-    lines = [{k: s[k] for k in ("scene_id", "level", "category", "tries", "demos", "failed")} for s in summaries]
+    # `unreplayable`: absent from markers written before demos were replayed
+    lines = [{**{k: s[k] for k in ("scene_id", "level", "category", "tries", "demos", "failed")},
+              "unreplayable": s.get("unreplayable", 0)} for s in summaries]
     write_text(RecoveriesLayout(root).scenes_log, "".join(json.dumps(x, sort_keys=True) + "\n" for x in
                                             sorted(lines, key=lambda x: x["scene_id"])))
     tries = sum(x["tries"] for x in lines)
+    dropped = sum(x["unreplayable"] for x in lines)
+    failed = tries - len(demos) - dropped
     console.print(f"[green]{len(demos)} recovery demo(s)[/green] from {sum(x['demos'] > 0 for x in lines)} of "
-                  f"{len(rows)} scene(s); {tries - len(demos)} unsuccessful tr{'y' if tries - len(demos) == 1 else 'ies'}"
-                  f" not kept -> {root}")
+                  f"{len(rows)} scene(s); {failed} unsuccessful tr{'y' if failed == 1 else 'ies'} not kept; "
+                  f"{dropped} dropped for not replaying in plain LIBERO -> {root}")
     return root

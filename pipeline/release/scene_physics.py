@@ -2,9 +2,11 @@
 
 Inputs: a `SimEnv` built from the scene's BDDL and the scene's flattened state. Outputs:
 problem strings naming the state file. Invariants: restoring is exact (the state read back
-equals the file bit for bit); the gripper's command ramp, which the MuJoCo state lacks, is
-set from the finger opening (nearly fully open -> open, else closed: a partly closed
-gripper was commanded closed, usually around an object), so a held object stays held.
+equals the file bit for bit); a scene is restored by the one restore
+(`pipeline.sim.restore.restore`, through `SimEnv.reset_to`) with `hold_grasp`: the gripper's
+command ramp, which the MuJoCo state lacks, is set from the finger opening (nearly fully
+open -> open, else closed: a partly closed gripper was commanded closed, usually around an
+object), so a held object stays held.
 """
 
 from __future__ import annotations
@@ -14,9 +16,6 @@ from pathlib import Path
 import numpy as np
 
 from pipeline.sim import SimEnv, TaskSpec, get_task
-
-# the Panda's fingers open to about 0.078 m; anything clearly below was commanded closed
-OPEN_GRIPPER_M = 0.07
 
 
 def scene_task(suite: str, task: str, instruction: str, bddl: Path) -> TaskSpec:
@@ -29,8 +28,8 @@ def scene_task(suite: str, task: str, instruction: str, bddl: Path) -> TaskSpec:
 
 
 def restore_scene(env: SimEnv, state: np.ndarray) -> None:
-    env.reset_to(state)
-    env.hold_gripper(closed=env.gripper_opening() < OPEN_GRIPPER_M)
+    """A released scene as the dataset card restores it (grasp held)."""
+    env.reset_to(state, hold_grasp=True)
 
 
 def check_restores(env: SimEnv, state: np.ndarray, path: Path) -> list[str]:

@@ -17,7 +17,8 @@ settle settings, `VERIFY_VERSION`), so a rerun checks only scenes that changed. 
 checks themselves fail on (its environment does not build, a worker dies under it) is set
 aside with the reason: no marker, reported as a problem, and checked again next time.
 Output: a per-scene table and every problem, each naming its file; `main` returns 1 if
-there is any problem, else 0.
+there is any problem, else 0. With `--replay` every recovery demo is also replayed in plain
+LIBERO (`pipeline.release.replay`).
 """
 
 from __future__ import annotations
@@ -232,8 +233,16 @@ def print_report(reports: list[SceneReport], set_problems: list[str], console: C
     console.print(f"[{colour}]{len(reports) - bad}/{len(reports)} scenes pass; {len(problems)} problem(s)[/{colour}]")
 
 
-def main(directory: str | Path, cfg: ReleaseConfig | None = None, *, executor: Executor | None = None) -> int:
+def main(directory: str | Path, cfg: ReleaseConfig | None = None, replay: bool = False,
+         demos: str | Path | None = None, *, executor: Executor | None = None) -> int:
+    """`replay`: also replay every recovery demo in plain LIBERO (`pipeline.release.replay`;
+    `demos`: their folder, default the run's `recoveries/` beside the release)."""
     console = Console()
     reports, set_problems = verify_release(Path(directory), cfg, executor, console)
     print_report(reports, set_problems, console)
-    return 1 if set_problems or any(not r.ok for r in reports) else 0
+    code = 1 if set_problems or any(not r.ok for r in reports) else 0
+    if replay:
+        from pipeline.release.replay import main_demos
+
+        code |= main_demos(Path(directory), demos, console)
+    return code

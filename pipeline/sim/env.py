@@ -2,10 +2,11 @@
 
 Building an environment is slow (about 4-8 s: XML assembly and model compilation); an
 episode start is cheap. So build one `SimEnv` per task and reuse it across that task's
-episodes: `reset_to(state)` runs LIBERO's soft reset followed by `set_init_state`, exactly
-as LIBERO's evaluation does, and also clears what the flattened MuJoCo state does not
-hold (the gripper's command ramp, the solver warm start), so an episode is bit-identical
-whether it runs in a fresh or a reused environment.
+episodes: `reset_to(state)` is `pipeline.sim.restore.restore` (the one restore, which the
+dataset card prints): LIBERO's seeded reset and `set_init_state`, exactly as LIBERO's
+evaluation does, plus what the flattened MuJoCo state does not hold (controller anchor,
+gripper command ramp, solver warm start), so an episode is bit-identical whether it runs in
+a fresh or a reused environment, here or in plain LIBERO.
 
 Quirks kept here and nowhere else:
 - robosuite images are upside down; `render` uses `mujoco.Renderer`, which is not.
@@ -35,6 +36,7 @@ from pipeline.sim.facts import JointFrame, JointKind, Region
 from pipeline.sim.fast_step import FastStepper
 from pipeline.sim.libero_setup import ensure_libero_ready
 from pipeline.sim.registry import TaskSpec
+from pipeline.sim.restore import restore
 from pipeline.sim.render import CAMERAS, FrameRenderer
 
 ACTION_DIM = 7  # delta position (3), delta axis-angle (3), gripper (-1 open, +1 close)
@@ -85,22 +87,27 @@ class SimEnv:
         m = self.env.sim.model
         return 1 + m.nq + m.nv
 
-    def reset_to(self, state: np.ndarray) -> None:
-        """Start an episode from a flattened MuJoCo state (an init state or a saved scene)."""
+    def reset_to(self, state: np.ndarray, hold_grasp: bool = False) -> None:
+        """Start an episode from a flattened MuJoCo state (an init state or a saved scene)
+        with `pipeline.sim.restore.restore`, the one restore (the dataset card prints it);
+        the caller's global RNG is left as it was. `hold_grasp`: set the gripper's command
+        ramp from the finger opening (a restored scene), else zero (an episode start)."""
         state = np.asarray(state, dtype=np.float64)
         if state.shape != (self.state_dim,):
             raise ValueError(
                 f"state has shape {state.shape}, but task {self.task.task_id} needs ({self.state_dim},)"
             )
-        with _quiet():
-            self._seeded_reset()
-        robot = self.env.robots[0]
-        robot.gripper.current_action = np.zeros(robot.gripper.dof)
+        saved = np.random.get_state()
+        try:
+            with _quiet():
+                restore(self._wrapper, state, hold_grasp=hold_grasp)
+        finally:
+            np.random.set_state(saved)
 
-        data = self.env.sim.data._data
-        data.qacc_warmstart[:] = 0
-        self._wrapper.set_init_state(state)
-        self.reanchor_controller()
+    @property
+    def libero(self):
+        """The LIBERO `ControlEnv` itself: `step` here is robosuite's own `env.step`."""
+        return self._wrapper
 
     def _seeded_reset(self) -> None:
         """LIBERO's reset with its fixture placement drawn from a fixed seed."""

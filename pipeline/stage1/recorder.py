@@ -2,8 +2,11 @@
 
 Inputs: a `SimEnv` at the episode's first policy step (after settle), then one
 `on_step(StepInfo)` call per control step (from `pipeline.rollout.run_episode`).
-Outputs (`write`): `states.npy` (steps+1, state_dim) float64 and `steps.parquet`
-(`STEP_SCHEMA`), each written atomically.
+Outputs (`write`): `states.npy` (steps+1, state_dim) float64, `actions.npy` (steps, 7)
+float64 and `steps.parquet` (`STEP_SCHEMA`), each written atomically. `actions.npy` holds
+the actions exactly as the simulator stepped them, so they replay bit for bit (the step
+log's float32 `action` column is the same values rounded; rounding before stepping instead
+would change every stage-1 rollout of a float64 policy).
 
 Invariants: states row t is the state *before* action t and the last row is the final
 state; step-log row t holds action t, the end-effector pose and gripper qpos of state t,
@@ -61,6 +64,9 @@ class EpisodeRecorder:
     def states_array(self) -> np.ndarray:
         return np.stack(self.states)
 
+    def actions_array(self) -> np.ndarray:
+        return np.asarray(self.actions, dtype=np.float64).reshape(self.steps, 7)
+
     def table(self) -> pa.Table:
         n = self.steps
 
@@ -85,5 +91,7 @@ class EpisodeRecorder:
         files = EpisodeFiles(Path(folder))
         states = self.states_array()
         write_with(files.states, lambda p: np.save(p, states))
+        actions = self.actions_array()
+        write_with(files.actions, lambda p: np.save(p, actions))
         table = self.table()
         write_with(files.steps, lambda p: pq.write_table(table, p))

@@ -218,9 +218,11 @@ LOCALIZATION_SCHEMA = pa.schema(
     + [pa.field("onset_kind", pa.string()), pa.field("events", pa.string())]
 )
 
-# a LeRobot data file, as pyarrow inferred it from the frame arrays
+# a LeRobot data file, as pyarrow inferred it from the frame arrays; since issue 30 also the
+# actions as stepped (float64), beside the float32 `action`
 LEROBOT_FRAME_SCHEMA = pa.schema([
     pa.field("observation.state", pa.list_(pa.float32(), 8)), pa.field("action", pa.list_(pa.float32(), 7)),
+    pa.field("action_float64", pa.list_(pa.float64(), 7)),
     pa.field("timestamp", pa.float32()), pa.field("frame_index", pa.int64()), pa.field("episode_index", pa.int64()),
     pa.field("index", pa.int64()), pa.field("task_index", pa.int64()),
 ])

@@ -30,6 +30,7 @@ class SceneSource:
     bddl_text: str
     states: np.ndarray  # (steps+1, dim) of the recorded episode
     steps_table: object  # pyarrow table (STEP_SCHEMA)
+    actions: np.ndarray  # (steps, 7) float64, as stepped (actions.npy)
     failure: np.ndarray  # a settled state with the goal not satisfied
     satisfied: np.ndarray  # a settled state with the goal satisfied
 
@@ -71,7 +72,7 @@ def scene_source() -> SceneSource:
         assert not env.goal_satisfied()
         satisfied = _goal_state(env, states[-1])
     # the official BDDL files already declare each type's objects on one line (normalized)
-    return SceneSource(task, task.bddl_path.read_text(), states, rec.table(), states[-1], satisfied)
+    return SceneSource(task, task.bddl_path.read_text(), states, rec.table(), rec.actions_array(), states[-1], satisfied)
 
 
 def annotation(suite: str, task: str, ep_id: str, instruction: str, fail_step: int) -> dict:
@@ -98,6 +99,7 @@ def make_run(root: Path, src: SceneSource, scenes: dict[str, tuple[bytes, str]])
         folder = root / "stage1" / "episodes" / ep_dir
         write_with(folder / "states.npy", lambda p: np.save(p, src.states))
         write_with(folder / "steps.parquet", lambda p: pq.write_table(src.steps_table, p))
+        write_with(folder / "actions.npy", lambda p: np.save(p, src.actions))
         records.append(EpisodeRecord(
             suite=t.suite, task=t.name, task_index=t.index, instruction=t.instruction, episode_id=ep_id,
             init_state=0, policy="scripted", policy_kind="scripted", seed=i, chunk_size=8, horizon=24,

@@ -52,7 +52,9 @@ def test_export_writes_the_v21_layout(exported):
         for key in ("observation.images.image", "observation.images.wrist_image"):
             assert (root / f"videos/chunk-000/{key}/episode_{ep:06d}.mp4").is_file()
     episodes = [json.loads(x) for x in (root / "meta/episodes.jsonl").read_text().splitlines()]
-    assert episodes == [{"episode_index": i, "tasks": [src.task.instruction], "length": 24} for i in (0, 1)]
+    # where each began: LIBERO's init state 0 of the task, then 10 settle steps (make_run's episodes)
+    assert episodes == [{"episode_index": i, "tasks": [src.task.instruction], "length": 24, "init_state": 0,
+                         "settle_steps": 10} for i in (0, 1)]
     assert [json.loads(x) for x in (root / "meta/tasks.jsonl").read_text().splitlines()] == [
         {"task_index": 0, "task": src.task.instruction}]
     stats = [json.loads(x) for x in (root / "meta/episodes_stats.jsonl").read_text().splitlines()]
@@ -66,6 +68,9 @@ def test_export_frames_follow_the_logged_states_and_actions(exported):
     assert np.allclose(table.column("timestamp").to_numpy(), np.arange(24) / 20)
     actions = np.array(table.column("action").to_pylist())
     assert np.allclose(actions, np.array(src.steps_table.column("action").to_pylist()))
+    # beside the float32 column, the actions exactly as stepped: they replay bit for bit
+    assert np.array_equal(np.array(table.column("action_float64").to_pylist()), src.actions)
+    assert np.array_equal(actions, src.actions.astype(np.float32))
     state = np.array(table.column("observation.state").to_pylist())
     eef = np.array(src.steps_table.column("eef_pos").to_pylist())
     # the step log holds the pose MuJoCo computed before the last substep's integration; the
@@ -121,6 +126,7 @@ def test_lerobots_own_dataset_class_opens_the_export(exported, tmp_path):
     assert got["episode_lengths"] == [24, 24] and got["tasks"] == [src.task.instruction]
     assert got["features"]["observation.state"] == {"dtype": "float32", "shape": [8]}
     assert got["features"]["action"] == {"dtype": "float32", "shape": [7]}
+    assert got["features"]["action_float64"] == {"dtype": "float64", "shape": [7]}
     cams = ["observation.images.image", "observation.images.wrist_image"]
     assert sorted(got["video_keys"]) == cams
     table = pq.read_table(root / "data/chunk-000/episode_000001.parquet")

@@ -60,10 +60,34 @@ def test_demos_are_successful_rollouts_logged_and_rendered_like_stage1(recorded,
                               np.load(root / demos[1].path / "states.npy")[-1])  # seeded variation
     (line,) = [json.loads(x) for x in (root / "scenes.jsonl").read_text().splitlines()]
     assert line["demos"] == 2 and line["tries"] == 2 + sum(line["failed"].values())
+    assert line["unreplayable"] == 0  # every kept demo replayed in plain LIBERO
     # done scenes are not redone
     monkeypatch.setattr(demos_mod, "attempt", lambda *a, **k: pytest.fail("a done scene was recorded again"))
     demos_mod.run(cfg)
     assert len(read_demos(root / "demos.parquet")) == 2
+
+
+def test_verify_replay_counts_every_demo_and_names_a_corrupted_action_file(recorded, tmp_path):
+    import shutil
+
+    from pipeline.release.build import release_dir
+    from pipeline.release.replay import verify_demos
+
+    cfg, root = recorded
+    rep = verify_demos(release_dir(cfg), root)
+    assert (rep.recorded, rep.replayed, rep.identical, rep.goal_at_step, rep.dropped) == (2, 2, 2, 2, 0)
+    assert rep.ok and rep.problems == []
+    copy = tmp_path / "recoveries"
+    shutil.copytree(root, copy)
+    demo = copy / read_demos(root / "demos.parquet")[1].path
+    actions = np.load(demo / "actions.npy")
+    # one float32 ulp on an arm command the controller does not clip away (not 0, not +-1)
+    t, i = next((t, i) for t in range(len(actions)) for i in range(6) if 0.01 < abs(actions[t, i]) < 0.99)
+    actions[t, i] = np.nextafter(np.float32(actions[t, i]), np.float32(-np.inf))
+    np.save(demo / "actions.npy", actions)
+    rep = verify_demos(release_dir(cfg), copy)
+    assert (rep.replayed, rep.identical) == (2, 1) and not rep.ok
+    assert rep.problems[0].startswith(f"{demo / 'actions.npy'}: replayed in plain LIBERO, the state after step {t + 1}")
 
 
 def test_unsuccessful_tries_are_counted_not_kept(tmp_path, scene_source):
