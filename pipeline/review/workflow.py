@@ -265,13 +265,15 @@ def submit_review(s: Session, user: User, item_id: int, body: dict, cfg: QueueSe
         if held is None and item.n_reviews + _active_leases(s, item.id, t, exclude_user=user.id) >= item.required_reviews:
             # leases are honoured: without one, a reviewer may not take a place others hold
             raise Stale(f"item {item.id} is held by other reviewers; take the next item instead")
+        # `item` was read under its row lock in this transaction (SQLite: the one writer), so
+        # the UPDATE's new counts are computed in memory too ("evaluate"), without a reload
         took = s.execute(
             update(Item).where(Item.id == item.id, Item.n_reviews < Item.required_reviews, Item.status.in_(COLLECTING))
-            .values(n_reviews=Item.n_reviews + 1, version=Item.version + 1)
+            .values(n_reviews=Item.n_reviews + 1, version=Item.version + 1),
+            execution_options={"synchronize_session": "evaluate"},
         ).rowcount
         if not took:
             raise Stale(f"item {item.id} already has its {item.required_reviews} reviews")
-        s.refresh(item, ["n_reviews", "version"])  # what the UPDATE changed (not the JSON columns)
         mine = Review(item_id=item.id, reviewer_id=user.id, decision=decision, values=values, edited=edited,
                       flag_reason=reason, idempotency_key=key, version=1)
         s.add(mine)
