@@ -25,7 +25,7 @@ def item(item_id: ItemId, user: UserDep, s: ReadDb):
 def lease(item_id: ItemId, user: UserDep, s: WriteDb, ctx: CtxDep):
     with s.begin():
         held = workflow.lease_item(s, user, workflow.get_item(s, item_id, lock=True), ctx.settings)
-        return {"item": item_id, "expires_at": audit.iso(held.expires_at)}
+        return JSONResponse({"item": item_id, "expires_at": audit.iso(held.expires_at)})
 
 
 @router.post("/{item_id}/review")

@@ -29,4 +29,4 @@ def progress(user: UserDep, s: ReadDb, ctx: CtxDep):
 def next_item(user: UserDep, s: WriteDb, ctx: CtxDep):
     with s.begin():
         item = workflow.lease_next(s, user, ctx.settings)
-        return {"item": item.id if item is not None else None}
+        return JSONResponse({"item": item.id if item is not None else None})
