@@ -13,7 +13,7 @@ per thread: the event loop and the threadpool, each timed by its thread's CPU cl
 writes the merged stats to FILE (read them with `python -m pstats FILE`).
 
     .venv/bin/python benchmarks/review_cpu.py [--cycles 300] [--warmup 40] [--clients 4] [--queue 2000]
-        [--backend sqlite|postgresql] [--base DIR] [--profile FILE]
+        [--backend sqlite|postgresql] [--base DIR] [--repeat N] [--profile FILE]
 Results: printed, and written to benchmarks/results/review_cpu.json.
 """
 
@@ -256,17 +256,20 @@ def main() -> int:
     ap.add_argument("--backend", choices=("sqlite", "postgresql"), default="sqlite")
     ap.add_argument("--base", type=Path, action="append", default=[],
                     help="another checkout whose server runs the same cycles (repeatable)")
+    ap.add_argument("--repeat", type=int, default=1,
+                    help="rounds over the checkouts, interleaved (the machine's load drifts); the median is reported")
     ap.add_argument("--profile", help="profile this checkout's server into this pstats file (no --base)")
     args = ap.parse_args()
     tmp = Path(tempfile.mkdtemp(prefix="review_cpu_"))
     run = tmp / "run"
     plan = [("this", REPO)] + ([] if args.profile else [(f"base{i}", b.resolve()) for i, b in enumerate(args.base)])
+    plan = [(f"{label}-{r}", label, code) for r in range(1 if args.profile else args.repeat) for label, code in plan]
     pg = None
     results = []
     try:
-        for i, (label, code) in enumerate(plan):
+        for i, (run_label, label, code) in enumerate(plan):
             if args.backend == "sqlite":
-                db_url = f"sqlite:///{tmp / label}.sqlite"
+                db_url = f"sqlite:///{tmp / run_label}.sqlite"
             else:
                 if pg is None:
                     sys.path.insert(0, str(REPO))
@@ -274,17 +277,22 @@ def main() -> int:
 
                     pg = PgCluster().__enter__()
                 db_url = pg.new_database()
-            results.append(measure(label, code, run, tmp, args, db_url, build_run=i == 0))
+            results.append({**measure(run_label, code, run, tmp, args, db_url, build_run=i == 0), "label": label})
     finally:
         if pg is not None:
             pg.__exit__(None, None, None)
-    print(f"\nserver CPU per reviewer cycle ({args.backend}, {args.clients} clients, {args.cycles} cycles; "
-          "next + item + frames + evidence + decision):")
-    for r in results:
-        print(f"  {r['label']:<8} {r['server_cpu_ms_per_cycle']:>8} ms   failed {r['failed']}   {r['code']}")
+    print(f"\nserver CPU per reviewer cycle ({args.backend}, {args.clients} clients, {args.cycles} cycles, "
+          f"{args.repeat} round(s); next + item + frames + evidence + decision):")
+    summary = {}
+    for label in dict.fromkeys(r["label"] for r in results):
+        rs = [r for r in results if r["label"] == label]
+        ms = sorted(r["server_cpu_ms_per_cycle"] for r in rs)
+        summary[label] = {"code": rs[0]["code"], "median_ms": ms[len(ms) // 2], "runs_ms": [r["server_cpu_ms_per_cycle"] for r in rs]}
+        print(f"  {label:<8} {ms[len(ms) // 2]:>8} ms (runs {summary[label]['runs_ms']})   "
+              f"failed {sum(r['failed'] for r in rs)}   {rs[0]['code']}")
     out = REPO / "benchmarks" / "results" / "review_cpu.json"
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps({"args": {k: str(v) for k, v in vars(args).items()}, "results": results,
+    out.write_text(json.dumps({"args": {k: str(v) for k, v in vars(args).items()}, "summary": summary, "results": results,
                                "load_avg": [round(x, 2) for x in os.getloadavg()]}, indent=2))
     return 1 if any(r["failed"] for r in results) else 0
 
