@@ -3,16 +3,17 @@
 Inputs: the request (its bearer token or session cookie and CSRF header) and the app's state.
 Outputs: FastAPI dependencies, used as annotated parameters (`UserDep`, `WriteDb`, ...).
 Invariants: every dependency that touches the database is a plain `def`, so FastAPI runs it
-in its threadpool, never on the event loop; a route lists the person first, so nobody
+in its threadpool, never on the event loop (the session dependencies are async but do no
+I/O: see `_close`); a route lists the person first, so nobody
 unauthenticated opens a transaction; a request body is read and parsed only after the caller
-is known (`json_body`), and only JSON (a 422 otherwise); a write route runs its work in
-`with s.begin():` on its `WriteDb`, so it is committed (or rolled back on any error) in the
+is known (`json_body`), and only JSON (a 422 otherwise); a route runs its work in
+`with s.begin():` on its `ReadDb` or `WriteDb`, so a write is committed (or rolled back on any error) in the
 route's own thread, before the response is sent: an acknowledged write is stored.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterator
+from collections.abc import AsyncIterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated
@@ -20,11 +21,12 @@ from typing import Annotated
 from fastapi import Depends, Path as PathParam, Request
 from fastapi.exceptions import RequestValidationError
 from pydantic import BaseModel, ValidationError
+from starlette.concurrency import run_in_threadpool
 from sqlalchemy.engine import Engine
 from sqlalchemy.orm import Session
 
 from pipeline.review import auth
-from pipeline.review.db import User, read_session, writer
+from pipeline.review.db import User, write_engine
 from pipeline.review.errors import TooManyRequests
 from pipeline.review.media import VideoAllowlist
 from pipeline.review.throttle import FailureThrottle
@@ -38,6 +40,11 @@ class ServerContext:
     settings: QueueSettings
     videos: VideoAllowlist = field(default_factory=VideoAllowlist)
     throttle: FailureThrottle = field(default_factory=FailureThrottle)
+    table_paths: dict[tuple[int, str], str] = field(default_factory=dict)  # (item, kind) -> path (routes.media)
+    writes: Engine = field(init=False)  # `db.write_engine(engine)`, made once
+
+    def __post_init__(self):
+        object.__setattr__(self, "writes", write_engine(self.engine))
 
 
 async def get_ctx(request: Request) -> ServerContext:  # no I/O: no threadpool hop
@@ -91,17 +98,34 @@ UserDep = Annotated[User, Depends(current_user)]
 AdjudicatorDep = Annotated[User, Depends(current_adjudicator)]
 
 
-def read_db(ctx: CtxDep) -> Iterator[Session]:
-    with read_session(ctx.engine) as s:
-        yield s
+async def _close(s: Session) -> None:
+    # the session dependencies below are async, without a threadpool hop of their own (a sync
+    # generator dependency costs two, in and out): creating a session does no I/O (it connects
+    # at its first statement, in the route's thread), nor does closing one whose transaction
+    # the route's `with s.begin():` ended; one left open is rolled back in the threadpool
+    if s.in_transaction():
+        await run_in_threadpool(s.close)
+    else:
+        s.close()
 
 
-def write_db(ctx: CtxDep) -> Iterator[Session]:
-    # no transaction here: the route runs `with s.begin():` itself, so the transaction (and
-    # SQLite's write lock) begins and ends inside one threadpool call, never held across the
-    # hops back to the event loop and into another thread for the dependency's exit
-    with writer(ctx.engine) as s:
+async def read_db(ctx: CtxDep) -> AsyncIterator[Session]:
+    s = Session(ctx.engine, expire_on_commit=False)
+    try:
         yield s
+    finally:
+        await _close(s)
+
+
+async def write_db(ctx: CtxDep) -> AsyncIterator[Session]:
+    # writes: BEGIN IMMEDIATE on SQLite (`db.write_engine`). No transaction here: the route runs
+    # `with s.begin():` itself, so the transaction (and SQLite's write lock) begins and ends
+    # inside one threadpool call, never held across the hops back to the event loop
+    s = Session(ctx.writes, expire_on_commit=False)
+    try:
+        yield s
+    finally:
+        await _close(s)
 
 
 ReadDb = Annotated[Session, Depends(read_db, scope="function")]

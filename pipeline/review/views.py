@@ -18,6 +18,7 @@ from sqlalchemy.orm import Session, defer
 from pipeline.review import blindness
 from pipeline.review.audit import iso
 from pipeline.review.db import Item, Lease, Review, User, now
+from pipeline.review.errors import NotFound
 from pipeline.review.fields import CATEGORIES, FIELDS, LEVELS, agreement, grid_time, snap_step
 from pipeline.stage3.inputs import CAMERAS
 from pipeline.vocab import COLLECTING, ItemStatus
@@ -274,6 +275,15 @@ def progress(s: Session, user: User, tolerance_s: float, control_hz: int = 20) -
         "agreement": {"closed_items": len(closed), "pairs": pairs, "all_fields": share(whole),
                       "by_field": {f: share(n) for f, n in per_field.items()}},
     }
+
+
+def media_path(s: Session, item_id: int, kind: str) -> str:
+    """The path (under the run folder) of an item's `kind` table ("evidence", "frames"), ""
+    if it has none; read alone, not with the rest of the item (404 if there is no item)."""
+    row = s.execute(select(Item.context[kind].as_string()).where(Item.id == item_id)).first()
+    if row is None:
+        raise NotFound(f"no item {item_id}")
+    return row[0] or ""
 
 
 def video_paths(s: Session) -> set[str]:

@@ -33,6 +33,7 @@ from pipeline.review.fields import FieldError, agreement, edited_fields, resolve
 from pipeline.vocab import COLLECTING, Decision, ItemStatus, Resolution
 
 DECISIONS = tuple(d.value for d in Decision)
+NOT_COLLECTING = tuple(s for s in ItemStatus if s not in COLLECTING)
 
 
 @dataclass(frozen=True)
@@ -162,9 +163,12 @@ def lease_next(s: Session, user: User, cfg: QueueSettings, tries: int = 8) -> It
     passed: list[int] = []
     order = (Item.quarantined, Item.n_reviews.desc(), Item.id)
     # the open items in queue order, a page at a time: the conditions below (correlated
-    # subqueries) then run on a page, not on every open item of a long queue
+    # subqueries) then run on a page, not on every open item of a long queue. The page reads
+    # the first rows of the queue-order index (`ix_items_queue`); "not closed" rather than
+    # "collecting" because SQLite's planner would take the status index for an IN and sort
+    # every open item instead
     for page in range(10_000):
-        ids = s.scalars(select(Item.id).where(Item.status.in_(COLLECTING)).order_by(*order)
+        ids = s.scalars(select(Item.id).where(Item.status.not_in(NOT_COLLECTING)).order_by(*order)
                         .limit(QUEUE_PAGE).offset(page * QUEUE_PAGE)).all()
         if not ids:
             return None
@@ -261,13 +265,15 @@ def submit_review(s: Session, user: User, item_id: int, body: dict, cfg: QueueSe
         if held is None and item.n_reviews + _active_leases(s, item.id, t, exclude_user=user.id) >= item.required_reviews:
             # leases are honoured: without one, a reviewer may not take a place others hold
             raise Stale(f"item {item.id} is held by other reviewers; take the next item instead")
+        # `item` was read under its row lock in this transaction (SQLite: the one writer), so
+        # the UPDATE's new counts are computed in memory too ("evaluate"), without a reload
         took = s.execute(
             update(Item).where(Item.id == item.id, Item.n_reviews < Item.required_reviews, Item.status.in_(COLLECTING))
-            .values(n_reviews=Item.n_reviews + 1, version=Item.version + 1)
+            .values(n_reviews=Item.n_reviews + 1, version=Item.version + 1),
+            execution_options={"synchronize_session": "evaluate"},
         ).rowcount
         if not took:
             raise Stale(f"item {item.id} already has its {item.required_reviews} reviews")
-        s.refresh(item)
         mine = Review(item_id=item.id, reviewer_id=user.id, decision=decision, values=values, edited=edited,
                       flag_reason=reason, idempotency_key=key, version=1)
         s.add(mine)

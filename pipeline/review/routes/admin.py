@@ -14,7 +14,8 @@ router = APIRouter(prefix="/api")
 
 @router.get("/status")
 def status(_user: AdjudicatorDep, s: ReadDb, ctx: CtxDep):
-    return JSONResponse({"counts": views.counts(s), **report.summary(s, ctx.settings.time_tolerance_s)})
+    with s.begin():
+        return JSONResponse({"counts": views.counts(s), **report.summary(s, ctx.settings.time_tolerance_s)})
 
 
 docs_router = APIRouter(prefix="/api", include_in_schema=False)

@@ -17,14 +17,15 @@ router = APIRouter(prefix="/api/items")
 
 @router.get("/{item_id}")
 def item(item_id: ItemId, user: UserDep, s: ReadDb):
-    return JSONResponse(views.reviewer_view(s, workflow.get_item(s, item_id), user))
+    with s.begin():
+        return JSONResponse(views.reviewer_view(s, workflow.get_item(s, item_id), user))
 
 
 @router.post("/{item_id}/lease")
 def lease(item_id: ItemId, user: UserDep, s: WriteDb, ctx: CtxDep):
     with s.begin():
         held = workflow.lease_item(s, user, workflow.get_item(s, item_id, lock=True), ctx.settings)
-        return {"item": item_id, "expires_at": audit.iso(held.expires_at)}
+        return JSONResponse({"item": item_id, "expires_at": audit.iso(held.expires_at)})
 
 
 @router.post("/{item_id}/review")

@@ -10,7 +10,7 @@ import hashlib
 from fastapi import APIRouter, Request
 from fastapi.responses import FileResponse, Response
 
-from pipeline.review import media, views, workflow
+from pipeline.review import media, views
 from pipeline.review.deps import CtxDep, ItemId, ReadDb, UserDep
 from pipeline.review.errors import NotFound
 
@@ -18,19 +18,29 @@ router = APIRouter()
 
 FILE_CACHE = "private, max-age=3600"
 TABLE_CACHE = "private, max-age=300"
+TABLE_PATHS_MAX = 100_000
 
 
 @router.get("/media/{rel:path}")
 def media_file(rel: str, _user: UserDep, s: ReadDb, ctx: CtxDep):
     """A video an item shows (`media.VideoAllowlist`), nothing else under the run."""
-    path = media.safe_path(ctx.run_dir, rel) if ctx.videos.allows(rel, lambda: views.video_paths(s)) else None
+    with s.begin():
+        path = media.safe_path(ctx.run_dir, rel) if ctx.videos.allows(rel, lambda: views.video_paths(s)) else None
     if path is None:
         raise NotFound("no such file")
     return FileResponse(path, headers={"Cache-Control": FILE_CACHE})
 
 
 def _table(request: Request, ctx, s, item_id: int, kind: str) -> Response:
-    rel = (workflow.get_item(s, item_id).context or {}).get(kind) or ""
+    # an item's context never changes (a new proposal is a new item): its table's path is
+    # read from the database once per process
+    rel = ctx.table_paths.get((item_id, kind))
+    if rel is None:
+        with s.begin():
+            rel = views.media_path(s, item_id, kind)
+        if len(ctx.table_paths) >= TABLE_PATHS_MAX:
+            ctx.table_paths.clear()
+        ctx.table_paths[(item_id, kind)] = rel
     path = media.safe_path(ctx.run_dir, rel)
     if path is None:
         raise NotFound(f"item {item_id} has no {kind} table")
