@@ -134,9 +134,22 @@ def export_lerobot(config: Path = CONFIG, out: Path = typer.Option(None, help="o
 
 
 @app.command("eval")
-def evaluate(config: Path = CONFIG, dry_run: bool = DRY) -> None:
+def evaluate(config: Path = CONFIG, dry_run: bool = DRY,
+             split: str = typer.Option(None, "--split", help="eval | train | all: which side of the release's "
+                                                             "train/eval split (default: eval.split, `eval`)")) -> None:
     """Evaluate policies on the scenario set: RSR, RD, RC."""
-    _call("pipeline.eval.run:run", _load(config, dry_run))
+    cfg = _load(config)
+    if split is not None:
+        if split not in ("eval", "train", "all"):
+            err.print(f"[red]--split[/red] must be eval, train or all, got {split!r}")
+            raise typer.Exit(2)
+        cfg.eval.split = split
+    if dry_run:
+        import yaml
+
+        console.print(yaml.safe_dump(cfg.model_dump(mode="json"), sort_keys=False))
+        raise typer.Exit(0)
+    _call("pipeline.eval.run:run", cfg)
 
 
 @app.command("bench-localize")

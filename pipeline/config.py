@@ -29,6 +29,22 @@ from pipeline.errors import ConfigError
 from pipeline.layout import RESOLVED_CONFIG
 
 SUITES = ("libero_spatial", "libero_object", "libero_goal", "libero_10", "libero_90")
+# suites reported also as one: the reference's LIBERO-100 is LIBERO-10 and LIBERO-90 together
+# (its 16 evaluation dimensions: spatial, object, goal, 100 x 4 levels)
+SUITE_UNIONS = {"libero_100": ("libero_10", "libero_90")}
+
+
+def reported_suites(present) -> list[tuple[str, tuple[str, ...]]]:
+    """(name, member suites) of every suite row a table shows: each present suite, then each
+    union with a present member, right after its last member. Rates of a union are computed
+    from its members' scenes and trials, never by averaging the members' rates."""
+    present = sorted(set(present))
+    out = [(s, (s,)) for s in present]
+    for name, members in SUITE_UNIONS.items():
+        if any(m in present for m in members):
+            last = max(i for i, (s, _) in enumerate(out) if s in members)
+            out.insert(last + 1, (name, tuple(m for m in members if m in present)))
+    return out
 
 
 def _scalar_types(annotation) -> set:
@@ -286,8 +302,18 @@ class Stage3Config(_Strict):
     workers: int = Field(default=2, ge=1, le=64)
 
 
+class SplitConfig(_Strict):
+    # share of released scenes that get recovery demonstrations (train); the rest is the
+    # evaluation set. Default 0.19: the reference recorded recoveries on 413 of 2,178 scenes.
+    train_share: float = Field(default=0.19, ge=0.0, le=1.0)
+    # a scene's side is a hash of (seed, scene id), not of the run seed: reruns with another
+    # run seed, or releases that add scenes, keep every existing scene on its side
+    seed: int = 0
+
+
 class ReleaseConfig(_Strict):
     output_dir: Path | None = None  # default: <run.output_dir>/release
+    split: SplitConfig = SplitConfig()  # train/eval split of the released scenes (release/split.py)
     certify_tries: int = Field(default=2, ge=0)  # expert tries per scene; 0 = skip
     # steps per certificate try: the horizon `recover eval` gives a policy from a scene
     # (eval.horizon, and the benchmark's own task horizon, 520), so "certified" means a
@@ -323,6 +349,10 @@ class EvalConfig(_Strict):
     horizon: int = Field(default=520, ge=1)
     chunk_sizes: list[int] = Field(default_factory=lambda: [8])
     temporal_context: Literal["none", "initial_frame", "history"] = "none"
+    # which scenes of a release with a train/eval split to evaluate: `eval` (default: the
+    # scenes no recovery demonstration was recorded on), `train`, or `all`; stage-2 scene
+    # folders carry no split and are evaluated whole
+    split: Literal["eval", "train", "all"] = "eval"
     # scenes: a released set (with scenarios.parquet) or stage-2 output; default: the run's
     # release folder if it exists, else <run>/stage2
     scenes_dir: Path | None = None

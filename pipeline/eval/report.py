@@ -193,12 +193,14 @@ def plots(data: dict, ecfg: EvalConfig, out: Path) -> list[str]:
 
 
 def write_report(rows: list[MetricRow], ecfg: EvalConfig, out: str | Path, scenes_dir=None,
-                 problems: list[str] | None = None, planned: int | None = None) -> dict:
+                 problems: list[str] | None = None, planned: int | None = None, split_note: str | None = None) -> dict:
     out = Path(out)
     data = compute(rows, ecfg)
     scene_rows = M.select(rows, mode="scene")
     header = (f"Scenes: `{scenes_dir}` ({len({r.scene_id for r in scene_rows})} evaluated); "
               f"trials recorded: {len(rows)}" + (f" of {planned} planned" if planned is not None else "") + ".\n")
+    if split_note:
+        header += f"\nEvaluated: {split_note}.\n"
     if problems:
         header += "\nProblems (skipped):\n\n" + "".join(f"- {p}\n" for p in problems)
     figs = plots(data, ecfg, out)

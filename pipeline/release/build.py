@@ -5,7 +5,8 @@ Output folder (default `<run>/release/`):
     selected_bddl_scenes_<suite>/<task>/episode_<id>/step_<NNNN>.bddl
                                                     step_<NNNN>_sim_state.npy
                                                     step_<NNNN>_history[...]   pre-failure history
-    scenarios.parquet        the manifest (`pipeline.release.manifest`), certificate included
+    scenarios.parquet        the manifest (`pipeline.release.manifest`), certificate and split included
+    split.json               the train/eval split's seed, share and counts (`pipeline.release.split`)
     README.md, figures/      the dataset card (`pipeline.release.card`)
     SHA256SUMS               every released file above (`sha256sum -c SHA256SUMS` works)
     _build/                  NOT part of the set: build time, quarantined annotations, certificates
@@ -25,12 +26,13 @@ from rich.console import Console
 
 from pipeline.atomic import write_bytes, write_json, write_text
 from pipeline.config import Config
-from pipeline.layout import RELEASE_BUILD, RELEASE_CARD, RELEASE_SUMS, SCENE_PREFIX, STATE_SUFFIX, ReleaseLayout, RunLayout
+from pipeline.layout import RELEASE_BUILD, RELEASE_CARD, RELEASE_SPLIT, RELEASE_SUMS, SCENE_PREFIX, STATE_SUFFIX, ReleaseLayout, RunLayout
 from pipeline.release.card import FIGURE, render_card, write_figure
 from pipeline.release.certify import certify_all, scene_refs
 from pipeline.release.manifest import MANIFEST_NAME, ScenarioRow, sha256_file, write_manifest
 from pipeline.records import QuarantineEntry, QuarantineReason
 from pipeline.release.sources import ReleaseItem, gather
+from pipeline.release.split import apply as apply_split
 
 if TYPE_CHECKING:
     from pipeline.executors import Executor
@@ -122,7 +124,9 @@ def build(cfg: Config, console: Console | None = None, executor: Executor | None
                                                  "certify_successes": c.successes,
                                                  "certify_reason": c.reason})
 
+    rows, split = apply_split(rows, cfg.release.split)
     write_manifest(out / MANIFEST_NAME, rows)
+    write_json(ReleaseLayout(out).split, split.model_dump(mode="json"))
     write_figure(rows, out / FIGURE)
     hashes = {
         "localization": sorted({r.localize_prompt_hash for r in rows if r.localize_prompt_hash}),
@@ -131,7 +135,7 @@ def build(cfg: Config, console: Console | None = None, executor: Executor | None
     people = {r.reviewer for it in items for r in it.annotation.reviews}
     write_text(ReleaseLayout(out).card, render_card(rows, cfg, hashes, len(people)))
 
-    released = sorted({p for r in rows for p, _ in r.files()} | {MANIFEST_NAME, FIGURE, RELEASE_CARD})
+    released = sorted({p for r in rows for p, _ in r.files()} | {MANIFEST_NAME, FIGURE, RELEASE_CARD, RELEASE_SPLIT})
     removed = _remove_stale(out, set(released))
     write_text(out / SUMS_NAME, "".join(f"{sha256_file(out / p)}  {p}\n" for p in released))
 

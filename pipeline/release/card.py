@@ -16,7 +16,7 @@ from pathlib import Path
 import yaml
 
 from pipeline.atomic import write_with
-from pipeline.config import Config
+from pipeline.config import Config, reported_suites
 from pipeline.records import Category, Level
 from pipeline.release.manifest import ScenarioRow
 
@@ -58,8 +58,10 @@ def write_figure(rows: list[ScenarioRow], path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    suites = sorted({r.suite for r in rows}) or ["(none)"]
-    counts = Counter((r.suite, r.level) for r in rows)
+    groups = reported_suites({r.suite for r in rows}) or [("(none)", ())]
+    suites = [name for name, _ in groups]  # LIBERO-100 as its own bar, from its halves' scenes
+    by_sl = Counter((r.suite, r.level) for r in rows)
+    counts = {(name, lv): sum(by_sl[(m, lv)] for m in members) for name, members in groups for lv in LEVELS}
     fig, ax = plt.subplots(figsize=(1.6 + 1.3 * len(suites), 3.6), dpi=100)
     bottom = [0] * len(suites)
     for level in LEVELS:
@@ -94,14 +96,38 @@ def _uncertified(rows: list[ScenarioRow]) -> str:
             + _table(["scene", "level", "category", "reason"], scenes) + "\n")
 
 
-def render_card(rows: list[ScenarioRow], cfg: Config, prompt_hashes: dict[str, list[str]], reviewers: int) -> str:
-    suites = sorted({r.suite for r in rows})
+def _suite_level_rows(rows: list[ScenarioRow]) -> list[list]:
+    """Scenes per suite (LIBERO-100 beside its halves, counted from scenes) and level, and a total."""
     by_sl = Counter((r.suite, r.level) for r in rows)
+    out = []
+    for name, members in reported_suites({r.suite for r in rows}):
+        counts = [sum(by_sl[(m, lv)] for m in members) for lv in LEVELS]
+        out.append([name if members == (name,) else f"*{name}*", *counts, sum(counts)])
+    out.append(["**total**", *(sum(by_sl[(s, lv)] for s in {r.suite for r in rows}) for lv in LEVELS), len(rows)])
+    return out
+
+
+def _split_section(rows: list[ScenarioRow], cfg: Config) -> str:
+    sp = cfg.release.split
+    blocks = []
+    for side in ("train", "eval"):
+        part = [r for r in rows if r.split == side]
+        blocks.append(f"**{side}** ({len(part)} scenes)\n\n" + _table(["suite", *LEVELS, "total"], _suite_level_rows(part)))
+    return (f"Recovery demonstrations (`recover demos`) are recorded on the **train** scenes only, and\n"
+            f"`recover eval` scores policies on the **eval** scenes by default, so a policy fine-tuned on\n"
+            f"the demonstrations is not scored on its own training scenes. A scene is train when\n"
+            f"SHA-256(\"split/<seed>/<scene id>\") read as a number in [0, 1) is below the train share\n"
+            f"(seed {sp.seed}, train share {sp.train_share}): uniform within every suite x level, the same for\n"
+            f"the same seed, and unchanged for existing scenes when scenes are added; a suite x level with\n"
+            f"two or more scenes always keeps one eval scene. The column `split` of `scenarios.parquet`\n"
+            f"and `split.json` record it; `recover verify` redraws it.\n\n" + "\n\n".join(blocks))
+
+
+def render_card(rows: list[ScenarioRow], cfg: Config, prompt_hashes: dict[str, list[str]], reviewers: int) -> str:
     by_cat = Counter(r.category for r in rows)
     certified = sum(r.certified is True for r in rows)
     attempted = sum(r.certified is not None for r in rows)
-    level_rows = [[s, *(by_sl[(s, lv)] for lv in LEVELS), sum(by_sl[(s, lv)] for lv in LEVELS)] for s in suites]
-    level_rows.append(["**total**", *(sum(by_sl[(s, lv)] for s in suites) for lv in LEVELS), len(rows)])
+    level_rows = _suite_level_rows(rows)
     cat_rows = [[c, by_cat[c]] for c in CATEGORIES if by_cat[c]] or [["(none)", 0]]
     hashes = "\n".join(f"- {k}: {', '.join(f'`{h}`' for h in v) or '(none)'}" for k, v in prompt_hashes.items())
     vers = "\n".join(f"- {k}: {v}" for k, v in versions().items())
@@ -134,7 +160,15 @@ send a few close commands (or open ones) before the policy acts, as `recover eva
 
 {_table(["suite", *LEVELS, "total"], level_rows)}
 
+*libero_100* is LIBERO-10 and LIBERO-90 together (the reference's LIBERO-100), counted from
+their scenes: with libero_spatial, libero_object and libero_goal it makes the 16 evaluation
+dimensions of the reference (4 suites x 4 levels). The total counts each scene once.
+
 ![scenes by suite and level]({FIGURE})
+
+## Train / eval split
+
+{_split_section(rows, cfg)}
 
 ## Scenes per failure category
 

@@ -58,6 +58,7 @@ class ExportEpisode:
     length: int  # frames to export (states[:length], actions[:length])
     bddl: Path | None = None  # the scene's own BDDL (recovery demos); None: the task's
     meta: dict = field(default_factory=dict)  # extra episodes.jsonl fields
+    split: str = "train"  # its side of the release's train/eval split (info.json's `splits`)
 
     def spec(self) -> TaskSpec:
         """The task whose model renders it (with the scene's own BDDL where it has one)."""
@@ -107,14 +108,32 @@ def write_video(path: Path, frames: np.ndarray) -> None:
     write_with(path, encode)
 
 
+def by_split(episodes: list[ExportEpisode]) -> list[ExportEpisode]:
+    """Train episodes first, then eval (LeRobot's `splits` are index ranges), each by key."""
+    return sorted(episodes, key=lambda x: (x.split != "train", x.key))
+
+
+def eval_episode_keys(manifest: Path) -> set[str]:
+    """Stage-1 episodes a released eval scene was cut from: their rollouts lead into held-out
+    scenes, so they sit in the eval split of the rollouts dataset."""
+    from pipeline.release.manifest import read_manifest
+
+    if not manifest.is_file():
+        return set()
+    return {episode_key(r.suite, r.task, r.episode_id) for r in read_manifest(manifest) if r.split == "eval"}
+
+
 def rollout_episodes(cfg: Config) -> list[ExportEpisode]:
-    stage1 = RunLayout.of(cfg).stage1
+    layout = RunLayout.of(cfg)
+    stage1 = layout.stage1
+    held_out = eval_episode_keys(layout.release.manifest)
     out = []
     for e in read_episodes(stage1.manifest):
         if cfg.release.lerobot_episodes == "failures" and e.success:
             continue
-        out.append(ExportEpisode(e.key, e.suite, e.task, e.instruction, stage1.episode(e).dir, e.steps))
-    return sorted(out, key=lambda x: x.key)
+        out.append(ExportEpisode(e.key, e.suite, e.task, e.instruction, stage1.episode(e).dir, e.steps,
+                                 split="eval" if e.key in held_out else "train"))
+    return by_split(out)
 
 
 def history_episodes(cfg: Config, manifest: Path) -> list[ExportEpisode]:
@@ -129,8 +148,8 @@ def history_episodes(cfg: Config, manifest: Path) -> list[ExportEpisode]:
         e = eps.get(episode_key(r.suite, r.task, r.episode_id))
         if e is not None and r.fail_step >= 1:
             out.append(ExportEpisode(f"{e.key}@{r.step}", r.suite, r.task, r.instruction, stage1.episode(e).dir,
-                                     min(r.fail_step, e.steps)))
-    return sorted(out, key=lambda x: x.key)
+                                     min(r.fail_step, e.steps), split="eval" if r.split == "eval" else "train"))
+    return by_split(out)
 
 
 def recovery_episodes(cfg: Config, release: Path) -> list[ExportEpisode]:
@@ -141,10 +160,11 @@ def recovery_episodes(cfg: Config, release: Path) -> list[ExportEpisode]:
     root = recoveries.root
     if not recoveries.demos.is_file() or not (release / MANIFEST_NAME).is_file():
         return []
-    bddl = {scene_id(r): release / r.bddl_path for r in read_manifest(release / MANIFEST_NAME)}
+    # demos of eval scenes (recorded before the release had a split) would leak held-out scenes
+    bddl = {scene_id(r): release / r.bddl_path for r in read_manifest(release / MANIFEST_NAME) if r.split != "eval"}
     out = []
     for d in read_demos(recoveries.demos):
-        if d.scene_id not in bddl:  # a demo of a scene no longer released
+        if d.scene_id not in bddl:  # a demo of a scene no longer released (or now held out)
             continue
         out.append(ExportEpisode(f"{d.scene_id}/demo_{d.demo_index}", d.suite, d.task, d.instruction, root / d.path,
                                  d.steps, bddl[d.scene_id],
@@ -164,7 +184,7 @@ def export_episode(env: SimEnv, ep: ExportEpisode, i: int, start: int, task_inde
     for key, f in frames.items():
         write_video(root / fmt.video_path(i, key), f)
     return {"episode_index": i, "tasks": [ep.instruction], "length": ep.length, "source": ep.key,
-            "meta": ep.meta, "stats": fmt.episode_stats(table, frames)}
+            "meta": ep.meta, "split": ep.split, "stats": fmt.episode_stats(table, frames)}
 
 
 @dataclass

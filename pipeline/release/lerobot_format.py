@@ -141,6 +141,21 @@ def _jsonl(rows: list[dict]) -> str:
     return "".join(json.dumps(r) + "\n" for r in rows)
 
 
+def splits(episodes: list[dict]) -> dict[str, str]:
+    """info.json's `splits`: name -> "start:end" episode range. The episodes come ordered by
+    split (train first: `lerobot_export.by_split`), each split one range; an entry without a
+    `split` is train. An empty split is left out (an empty dataset: train "0:0")."""
+    names = [e.get("split", "train") for e in episodes]
+    out, start = {}, 0
+    for i in range(1, len(names) + 1):
+        if i == len(names) or names[i] != names[start]:
+            if names[start] in out:
+                raise ValueError(f"episodes of split {names[start]!r} are not contiguous (order them by split)")
+            out[names[start]] = f"{start}:{i}"
+            start = i
+    return out or {"train": "0:0"}
+
+
 def write_meta(root: Path, episodes: list[dict], tasks: list[str], size: int, robot_type: str = "panda") -> None:
     """`episodes`: dicts with episode_index, tasks, length, stats (sorted by index) and optional
     `meta` (extra episodes.jsonl fields, e.g. a recovery demo's scene id; LeRobot's converter
@@ -151,7 +166,7 @@ def write_meta(root: Path, episodes: list[dict], tasks: list[str], size: int, ro
         "total_episodes": len(episodes), "total_frames": total_frames, "total_tasks": len(tasks),
         "total_videos": len(episodes) * len(VIDEO_KEYS),
         "total_chunks": (max((e["episode_index"] for e in episodes), default=-1) // CHUNKS_SIZE) + 1,
-        "chunks_size": CHUNKS_SIZE, "fps": FPS, "splits": {"train": f"0:{len(episodes)}"},
+        "chunks_size": CHUNKS_SIZE, "fps": FPS, "splits": splits(episodes),
         "data_path": DATA_PATH, "video_path": VIDEO_PATH, "features": features(size),
     }
     write_text(root / "meta" / "info.json", json.dumps(info, indent=4) + "\n")

@@ -106,6 +106,7 @@ SCENARIO_SCHEMA = pa.schema(
         # added by the recovery-expert certificates (why a scene is not certified); the one
         # column not in the hand-written schema, declared nullable so older manifests still read
         pa.field("certify_reason", pa.string()),
+        pa.field("split", pa.string()),  # issue 24: train / eval
     ],
     metadata={"schema_version": str(SCHEMA_VERSION), "name": "libero-recover scenarios"},
 )

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import shutil
 import subprocess
 from pathlib import Path
@@ -39,7 +40,12 @@ def test_release_lays_out_scene_pairs_history_manifest_and_card(run):
     assert (out / "figures/scenes_by_suite_level.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     check = subprocess.run(["sha256sum", "-c", "--quiet", "SHA256SUMS"], cwd=out, capture_output=True, text=True)
     assert check.returncode == 0, check.stdout + check.stderr
-    assert len((out / "SHA256SUMS").read_text().splitlines()) == 2 * 3 + 3
+    assert len((out / "SHA256SUMS").read_text().splitlines()) == 2 * 3 + 4  # + split.json
+    # two scenes of one suite x level: the split keeps one of them for eval, and says so
+    assert "eval" in {r.split for r in rows}
+    split = json.loads((out / "split.json").read_text())
+    assert (split["seed"], split["train_share"]) == (0, 0.19) and sum(split["counts"].values()) == 2
+    assert "## Train / eval split" in card and "**eval** (" in card
 
 
 def test_release_bytes_do_not_depend_on_where_or_when_it_was_built(run, tmp_path):
