@@ -35,10 +35,11 @@ SUITE_UNIONS = {"libero_100": ("libero_10", "libero_90")}
 
 
 def reported_suites(present) -> list[tuple[str, tuple[str, ...]]]:
-    """(name, member suites) of every suite row a table shows: each present suite, then each
-    union with a present member, right after its last member. Rates of a union are computed
-    from its members' scenes and trials, never by averaging the members' rates."""
-    present = sorted(set(present))
+    """(name, member suites) of every suite row a table shows: each present suite (in the
+    order given; a set is sorted), then each union with a present member, right after its last
+    member. Rates of a union are computed from its members' scenes and trials, never by
+    averaging the members' rates."""
+    present = sorted(present) if isinstance(present, (set, frozenset)) else list(dict.fromkeys(present))
     out = [(s, (s,)) for s in present]
     for name, members in SUITE_UNIONS.items():
         if any(m in present for m in members):

@@ -15,7 +15,7 @@ from pathlib import Path
 
 from pipeline.config import Config, PolicyConfig
 from pipeline.eval.protocol import Trial
-from pipeline.eval.rd import episode_dir, rd_starts
+from pipeline.eval.rd import episode_dir, rd_starts, stage2_phases
 from pipeline.eval.scenes import Scene
 from pipeline.layout import RunLayout
 
@@ -33,6 +33,11 @@ def default_scenes_dir(cfg: Config) -> Path:
 
 def stage1_dir(cfg: Config) -> Path:
     return Path(cfg.eval.stage1_dir) if cfg.eval.stage1_dir else RunLayout.of(cfg).stage1.root
+
+
+def stage2_dir(cfg: Config) -> Path:
+    """Stage 2 beside the stage-1 folder the RD reruns come from: its phases label them."""
+    return RunLayout(stage1_dir(cfg).parent).stage2.root
 
 
 def plan_trials(cfg: Config, scenes: list[Scene]) -> tuple[list[Trial], list[str]]:
@@ -54,9 +59,16 @@ def plan_trials(cfg: Config, scenes: list[Scene]) -> tuple[list[Trial], list[str
         for s in scenes:
             folder = episode_dir(stage1_dir(cfg), s.suite, s.task, s.episode_id)
             try:
-                starts[s] = (folder, rd_starts(folder, s.step, e.rd_every_steps))
+                phases = stage2_phases(stage2_dir(cfg), s.source_key)
+                # the onset: a released scene's reviewed one; a stage-2 scene's, its phases'
+                onset = s.step if phases is None else s.fail_step if s.fail_step is not None else phases.during[0]
+                starts[s] = (folder, rd_starts(folder, onset, e.rd_every_steps, phases))
             except (FileNotFoundError, ValueError) as err:
                 problems.append(f"RD skipped for {s.scene_id}: {err}")
+                continue
+            if phases is None:
+                problems.append(f"RD of {s.scene_id}: no stage-2 phases (localization) in {stage2_dir(cfg)}: "
+                                f"starts labelled pre / post at the scene step only")
         for p in e.policies:
             for s, (folder, st) in starts.items():
                 for start in st:

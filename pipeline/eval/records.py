@@ -38,7 +38,8 @@ class TrialMode(StrEnum):
 
 class RDPhase(StrEnum):
     pre = "pre"  # start state before the failure onset
-    post = "post"  # start state at or after the onset
+    during = "during"  # while the failure unfolds (stage 2's during phase)
+    post = "post"  # after it (or at or after the onset when the phases are unknown)
 
 
 class EvalEpisode(Record):

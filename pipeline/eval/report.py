@@ -3,6 +3,7 @@
 Inputs: evaluation rows (`records.MetricRow`, from `records.read_rows`), the `EvalConfig` (epsilon, chunk sizes).
 Outputs in `out`: `report.md`; `metrics.json` (NaN written as null); `rsr_heatmap.png`
 (RSR per suite x level, one panel per policy); `gripper.png` (open vs closed);
+`rd_phases.png` (RD rerun success before / during / after the failure, per suite);
 `chunk_sweep.png` (RSR per chunk size, when more than one was run).
 
 Tables use the first configured chunk size, except the sweep. Rates are percentages; an
@@ -15,7 +16,7 @@ import math
 from pathlib import Path
 
 from pipeline.atomic import write_json, write_text, write_with
-from pipeline.config import SUITES, EvalConfig
+from pipeline.config import SUITES, EvalConfig, reported_suites
 from pipeline.eval import metrics as M
 from pipeline.eval.records import MetricRow
 from pipeline.layout import EvalLayout
@@ -53,30 +54,36 @@ def _table(header: list[str], body: list[list[str]]) -> str:
     return "\n".join(lines + ["| " + " | ".join(r) + " |" for r in body]) + "\n"
 
 
+def suite_rows(rows) -> list[tuple[str, tuple[str, ...]]]:
+    """(row name, member suites): each suite, and LIBERO-100 (libero_100) beside its halves,
+    pooled from their trials (`config.reported_suites`)."""
+    return reported_suites(_ordered({r.suite for r in rows}, SUITES))
+
+
 def compute(rows: list[MetricRow], ecfg: EvalConfig) -> dict:
     """Every number of the report, as plain data (NaN -> None)."""
     chunk = ecfg.chunk_sizes[0]
     out: dict = {"chunk_size": chunk, "epsilon": ecfg.epsilon, "policies": {}}
-    suites = _ordered({r.suite for r in rows}, SUITES)
+    groups = suite_rows(rows)
     for pol in _ordered({r.policy for r in rows}, []):
         base = M.select(rows, policy=pol)
         main = M.select(base, chunk_size=chunk)
         res = {
             "rsr": _nan_none(M.rsr(main)),
-            "rsr_suite_level": {s: {lv or "unlabeled": _nan_none(M.rsr(main, suite=s, level=lv)) for lv in _levels(main)}
-                                | {"all": _nan_none(M.rsr(main, suite=s))} for s in suites},
+            "rsr_suite_level": {s: {lv or "unlabeled": _nan_none(M.rsr(main, suite=m, level=lv)) for lv in _levels(main)}
+                                | {"all": _nan_none(M.rsr(main, suite=m))} for s, m in groups},
             "rsr_level": {lv or "unlabeled": _nan_none(M.rsr(main, level=lv)) for lv in _levels(main)},
-            "rc": {s: _nan_none(M.rc(main, suite=s)) for s in suites} | {"all": _nan_none(M.rc(main))},
+            "rc": {s: _nan_none(M.rc(main, suite=m)) for s, m in groups} | {"all": _nan_none(M.rc(main))},
             "task_rates": {f"{s}/{t}": _nan_none(v) for (s, t), v in M.task_rates(main).items()},
             "rd": {},
             "gripper": {g: _nan_none(M.rsr(main, gripper=g)) for g in ("open", "closed")},
             "chunk_sweep": {str(c): _nan_none(M.rsr(base, chunk_size=c)) for c in ecfg.chunk_sizes},
         }
-        for s in suites + [None]:
-            r = M.rd(main, ecfg.epsilon, **({} if s is None else {"suite": s}))
-            res["rd"][s or "all"] = {"rd": _nan_none(r.rd), "m_pre": _nan_none(r.m_pre),
-                                     "m_post": _nan_none(r.m_post), "n_pre": r.n_pre, "n_post": r.n_post,
-                                     "scenes": r.scenes}
+        for s, m in groups + [("all", None)]:
+            r = M.rd(main, ecfg.epsilon, **({} if m is None else {"suite": m}))
+            res["rd"][s] = {"rd": _nan_none(r.rd), "m_pre": _nan_none(r.m_pre),
+                            "m_during": _nan_none(r.m_during), "m_post": _nan_none(r.m_post),
+                            "n_pre": r.n_pre, "n_during": r.n_during, "n_post": r.n_post, "scenes": r.scenes}
         out["policies"][pol] = res
     return out
 
@@ -98,27 +105,37 @@ def summary_table(rows: list[MetricRow], data: dict) -> str:
     return _table(["policy", "kind"] + [lv or "unlabeled" for lv in lvls] + ["all"], body)
 
 
+def _name(suite: str, members: tuple[str, ...]) -> str:
+    return suite if members == (suite,) else f"*{suite}*"  # a union: LIBERO-100
+
+
 def markdown(rows: list[MetricRow], ecfg: EvalConfig, data: dict, header: str = "") -> str:
     chunk = data["chunk_size"]
-    suites = _ordered({r.suite for r in rows}, SUITES)
+    groups = suite_rows(rows)
     parts = ["# Recovery evaluation\n\n", header, "\n",
              f"Rates in %, trials in parentheses; — = no trials in that subset. Chunk size {chunk} unless noted; "
              f"RD epsilon {ecfg.epsilon:g}; RC uses the population std of task rates.\n",
+             *(["*libero_100* is LIBERO-100, libero_10 and libero_90 together: its rates pool their trials "
+                "(not an average of the two rates).\n"] if any(m != (s,) for s, m in groups) else []),
              "\n## RSR per policy × level\n\nThe experts read privileged simulator state: they are references "
              "(what a competent recovering policy scores), not contestants.\n\n", summary_table(rows, data)]
     for pol, res in data["policies"].items():
         main = M.select(rows, policy=pol, chunk_size=chunk)
         lvls = _levels(main)
         head = ["suite"] + [lv or "unlabeled" for lv in lvls] + ["all"]
-        body = [[s] + [_cell(main, suite=s, level=lv) for lv in lvls] + [_cell(main, suite=s)] for s in suites]
+        body = [[_name(s, m)] + [_cell(main, suite=m, level=lv) for lv in lvls] + [_cell(main, suite=m)]
+                for s, m in groups]
         body.append(["**all**"] + [_cell(main, level=lv) for lv in lvls] + [_cell(main)])
         parts += [f"\n## Policy `{pol}`\n\n### RSR per suite × level\n\n", _table(head, body)]
-        rd_body = [[k, pct(v["m_pre"]), pct(v["m_post"]), "—" if v["rd"] is None else f"{v['rd']:.3f}",
-                    f"{v['scenes']} / {v['n_pre']} / {v['n_post']}"] for k, v in res["rd"].items()]
-        parts += ["\n### RD per suite\n\n", _table(["suite", "M_pre", "M_post", "RD", "scenes / pre / post reruns"], rd_body)]
+        rd_body = [[k, pct(v["m_pre"]), pct(v["m_during"]), pct(v["m_post"]),
+                    "—" if v["rd"] is None else f"{v['rd']:.3f}",
+                    f"{v['scenes']} / {v['n_pre']} / {v['n_during']} / {v['n_post']}"] for k, v in res["rd"].items()]
+        parts += ["\n### RD per suite\n\nReruns from states along the source rollout, by stage 2's phase: before "
+                  "the failure (pre), while it unfolds (during), after it (post); RD = 1 - (M_post + ε)/(M_pre + ε).\n\n",
+                  _table(["suite", "M_pre", "M_during", "M_post", "RD", "scenes / pre / during / post reruns"], rd_body)]
         rc_body = [[k, "—" if v is None else f"{v:.3f}"] for k, v in res["rc"].items()]
         parts += ["\n### RC per suite\n\n", _table(["suite", "RC"], rc_body)]
-        g_body = [[s] + [_cell(main, suite=s, gripper=g) for g in ("open", "closed")] for s in suites]
+        g_body = [[_name(s, m)] + [_cell(main, suite=m, gripper=g) for g in ("open", "closed")] for s, m in groups]
         g_body.append(["**all**"] + [_cell(main, gripper=g) for g in ("open", "closed")])
         parts += ["\n### Gripper initialization: open vs closed\n\n", _table(["suite", "open", "closed"], g_body)]
         if len(ecfg.chunk_sizes) > 1:
@@ -173,6 +190,9 @@ def plots(data: dict, ecfg: EvalConfig, out: Path) -> list[str]:
     plt.close(fig)
     written.append("gripper.png")
 
+    if any(v["scenes"] for p in pols for v in data["policies"][p]["rd"].values()):
+        written.append(_rd_phase_plot(data, pols, out, plt, np))
+
     if len(ecfg.chunk_sizes) > 1:
         fig, ax = plt.subplots(figsize=(4.5, 3))
         for pol in pols:
@@ -190,6 +210,30 @@ def plots(data: dict, ecfg: EvalConfig, out: Path) -> list[str]:
         plt.close(fig)
         written.append("chunk_sweep.png")
     return written
+
+
+PHASES = ("pre", "during", "post")
+
+
+def _rd_phase_plot(data: dict, pols: list[str], out: Path, plt, np) -> str:
+    """Success of the RD reruns per phase (pre / during / post), one line per suite, one
+    panel per policy: the three-phase drop."""
+    fig, axes = plt.subplots(1, len(pols), figsize=(4.2 * len(pols), 3.2), squeeze=False)
+    for ax, pol in zip(axes[0], pols, strict=True):
+        for suite, v in data["policies"][pol]["rd"].items():
+            if not v["scenes"]:
+                continue
+            ys = [np.nan if v[f"m_{ph}"] is None else 100 * v[f"m_{ph}"] for ph in PHASES]
+            ax.plot(range(3), ys, marker="o", label=suite, linestyle="--" if suite == "all" else "-")
+        ax.set_xticks(range(3), PHASES)
+        ax.set_ylim(-5, 105)
+        ax.set_ylabel("rerun success %")
+        ax.set_title(f"RD phases — {pol}")
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    write_with(out / "rd_phases.png", lambda p: fig.savefig(p, dpi=120))
+    plt.close(fig)
+    return "rd_phases.png"
 
 
 def write_report(rows: list[MetricRow], ecfg: EvalConfig, out: str | Path, scenes_dir=None,

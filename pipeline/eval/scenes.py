@@ -37,6 +37,7 @@ class Scene:
     init_state: int | None = None  # official init state the source episode started from
     history_paths: tuple[Path, ...] = field(default_factory=tuple)
     split: str | None = None  # train | eval in a release with a split; None: no split
+    fail_step: int | None = None  # the (reviewed) failure onset of a released scene; None: unknown
 
     @property
     def scene_id(self) -> str:
@@ -60,7 +61,7 @@ def _from_manifest(root: Path, manifest: Path) -> tuple[list[Scene], list[str]]:
             continue
         scenes.append(Scene(r.suite, r.task, r.episode_id, r.step, bddl, state, r.level, r.category,
                             r.instruction, r.init_state, tuple(root / h for h in r.history_paths),
-                            None if r.split is None else str(r.split)))
+                            None if r.split is None else str(r.split), r.fail_step))
     return scenes, problems
 
 

@@ -96,3 +96,14 @@ def test_lerobot_splits_are_the_index_ranges_of_each_side():
     assert splits([{}, {}]) == {"train": "0:2"}
     with pytest.raises(ValueError, match="contiguous"):
         splits([{"split": "train"}, {"split": "eval"}, {"split": "train"}])
+
+
+def test_the_card_counts_libero_100_from_its_halves_and_each_scene_once_in_the_total():
+    from pipeline.config import Config
+    from pipeline.release.card import render_card
+
+    rows, _ = apply(_rows(4), SplitConfig())  # 4 scenes per suite, one per level
+    card = render_card(rows, Config(), {}, 2)
+    assert "| *libero_100* | 2 | 2 | 2 | 2 | 8 |" in card
+    assert "| **total** | 5 | 5 | 5 | 5 | 20 |" in card
+    assert "16 evaluation" in card and "## Train / eval split" in card

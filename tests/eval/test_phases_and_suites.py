@@ -1,0 +1,64 @@
+"""Issue 24 parity: RD starts in three phases from stage 2's split, M_during beside M_pre /
+M_post, and LIBERO-100 reported beside its halves, pooled from trials. No simulator."""
+
+from __future__ import annotations
+
+import json
+
+from pipeline.config import EvalConfig
+from pipeline.eval.metrics import rd
+from pipeline.eval.rd import at_onset, stage2_phases, start_steps
+from pipeline.eval.report import write_report
+from pipeline.records import PhaseFields
+from tests.eval.test_metrics import row
+
+
+def test_rd_starts_carry_stage2s_three_phases():
+    phases = PhaseFields(pre=(0, 45), during=(45, 70), post=(70, 101))
+    assert start_steps(101, onset=45, every=20, phases=phases) == [
+        (0, "pre"), (20, "pre"), (40, "pre"), (60, "during"), (80, "post"), (100, "post")]
+
+
+def test_phases_follow_a_reviewed_onset():
+    phases = PhaseFields(pre=(0, 45), during=(45, 70), post=(70, 101))
+    assert at_onset(phases, 30, 101) == PhaseFields(pre=(0, 30), during=(30, 70), post=(70, 101))
+    assert at_onset(phases, 80, 101) == PhaseFields(pre=(0, 80), during=(80, 81), post=(81, 101))
+
+
+def test_stage2_phases_are_read_from_the_localization_or_none(tmp_path):
+    assert stage2_phases(tmp_path, "libero_goal/t/ep") is None
+    loc = tmp_path / "localizations/libero_goal/t/ep.json"
+    loc.parent.mkdir(parents=True)
+    loc.write_text("{}")
+    try:
+        stage2_phases(tmp_path, "libero_goal/t/ep")
+    except ValueError as e:
+        assert str(loc) in str(e)
+    else:
+        raise AssertionError("a broken localization was read")
+
+
+def test_rd_reports_m_during_from_the_matched_scenes():
+    rows = [row(True, mode="rd", rd_phase="pre", scene="s"), row(False, mode="rd", rd_phase="post", scene="s"),
+            row(True, mode="rd", rd_phase="during", scene="s"), row(False, mode="rd", rd_phase="during", scene="s"),
+            row(True, mode="rd", rd_phase="during", scene="unmatched")]
+    r = rd(rows, 1e-3)
+    assert (r.m_pre, r.m_during, r.m_post, r.n_during, r.scenes) == (1.0, 0.5, 0.0, 2, 1)
+
+
+def test_libero_100_is_pooled_from_trials_beside_its_halves(tmp_path):
+    # libero_10: 1 of 1; libero_90: 1 of 3. Pooled: 2 of 4 = 50 %, where averaging would say 66.7 %
+    rows = [row(True, suite="libero_10")] + [row(w, suite="libero_90") for w in (True, False, False)]
+    rows += [row(True, suite="libero_goal")]
+    rows += [row(True, suite="libero_90", mode="rd", rd_phase=p, scene="s") for p in ("pre", "during")]
+    rows += [row(False, suite="libero_90", mode="rd", rd_phase="post", scene="s")]
+    data = write_report(rows, EvalConfig(), tmp_path)
+    grid = data["policies"]["scripted"]["rsr_suite_level"]
+    assert list(grid) == ["libero_goal", "libero_10", "libero_90", "libero_100"]
+    assert grid["libero_100"]["all"] == 0.5
+    md = (tmp_path / "report.md").read_text()
+    assert "| *libero_100* | 50.0 (4) | — | — | — | 50.0 (4) |" in md
+    metrics = json.loads((tmp_path / "metrics.json").read_text())
+    assert metrics["policies"]["scripted"]["rd"]["libero_100"]["m_during"] == 1.0
+    assert "| suite | M_pre | M_during | M_post | RD |" in md
+    assert (tmp_path / "rd_phases.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
