@@ -70,6 +70,9 @@ def source_init_state(scene: Scene) -> int | None:
     return int(m.group(1)) if m else None
 
 
+HISTORY_FRAMES = 8  # the reference's history variant: the 8 frames before the failure
+
+
 def temporal_context(env, policy, trial: Trial) -> dict:
     """What an accepting policy gets in `Observation.context` (call before restoring)."""
     if trial.temporal_context == "none" or not getattr(policy, "accepts_context", False):
@@ -82,7 +85,13 @@ def temporal_context(env, policy, trial: Trial) -> dict:
             if p.suffix == ".npz":
                 with np.load(p) as z:
                     hist.update({k: z[k] for k in z.files})
-        return {"kind": "history", "history": hist, "history_paths": [str(p) for p in trial.scene.history_paths]}
+        ctx = {"kind": "history", "history": hist, "history_paths": [str(p) for p in trial.scene.history_paths]}
+        cams = list(getattr(policy, "cameras", ()))
+        if cams and "sim_states" in hist and len(hist["sim_states"]):
+            # image policies see the history as frames: its last HISTORY_FRAMES logged states,
+            # rendered like the current frames (the released history holds states, not pixels)
+            ctx["history_images"] = env.render_states(hist["sim_states"][-HISTORY_FRAMES:], cams, policy.image_size)
+        return ctx
     index = source_init_state(trial.scene)
     if index is None:
         return {}

@@ -10,8 +10,9 @@ original instruction; episodes.jsonl also names each demo's scene id, level and
 category), each a LeRobot v2.1 dataset (`pipeline.release.lerobot_format`). Frames are rendered from the
 logged states at 20 Hz (every control step), third-person and wrist cameras, right side
 up, at `release.lerobot_render_quality` (standard: LIBERO's look); state = eef position, eef
-axis-angle, the two gripper finger positions (8-D, as in LIBERO's LeRobot datasets); action =
-the 7-D command.
+axis-angle, the two gripper finger positions (8-D, as in LIBERO's LeRobot datasets), with the
+arm's joint states beside it (`observation.states.joint_state`: the 7 joint positions;
+`observation.states.gripper_state`: the 2 finger joints); action = the 7-D command.
 
 Episodes are rendered in parallel as a `Stage` (pipeline/runner/) on the run's executor: one
 unit per episode, the episodes of one simulator model (suite, task, BDDL content) share a
@@ -86,6 +87,15 @@ def render_episode(env: SimEnv, states: np.ndarray, size: int,
         for key, cam in fmt.VIDEO_KEYS.items():
             frames[key].append(env.render(cam, size, quality))
     return np.asarray(robot), {k: np.stack(v) for k, v in frames.items()}
+
+
+def joint_states(env: SimEnv, states: np.ndarray) -> np.ndarray:
+    """The arm's 7 joint positions (robot0_joint1..7) for each logged simulator state."""
+    out = []
+    for s in states:
+        env.set_state(s)
+        out.append(env.arm_joints()[0])
+    return np.asarray(out).reshape(len(states), 7)
 
 
 def write_video(path: Path, frames: np.ndarray) -> None:
@@ -179,7 +189,7 @@ def export_episode(env: SimEnv, ep: ExportEpisode, i: int, start: int, task_inde
     states = np.load(files.states)[: ep.length]
     actions = np.array(pq.read_table(files.steps).column("action").to_pylist())[: ep.length]
     robot, frames = render_episode(env, states, size, quality)
-    table = fmt.frame_table(robot, actions, i, start, task_index)
+    table = fmt.frame_table(robot, actions, i, start, task_index, joint_states(env, states))
     write_with(root / fmt.data_path(i), lambda p: pq.write_table(table, p))
     for key, f in frames.items():
         write_video(root / fmt.video_path(i, key), f)

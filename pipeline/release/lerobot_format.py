@@ -35,6 +35,12 @@ VIDEO_PATH = "videos/chunk-{episode_chunk:03d}/{video_key}/episode_{episode_inde
 VIDEO_KEYS = {"observation.images.image": "agentview", "observation.images.wrist_image": "robot0_eye_in_hand"}
 STATE_NAMES = ["x", "y", "z", "axis_angle1", "axis_angle2", "axis_angle3", "gripper_left", "gripper_right"]
 ACTION_NAMES = ["dx", "dy", "dz", "droll", "dpitch", "dyaw", "gripper"]
+# the arm's joint states beside the end-effector state, under the keys of LIBERO's LeRobot
+# datasets (HuggingFaceVLA/libero): robot0's 7 joint positions (base to wrist) and the two
+# finger joint positions; from the recorded MuJoCo states, like everything else here
+JOINT_KEY, GRIPPER_KEY = "observation.states.joint_state", "observation.states.gripper_state"
+JOINT_NAMES = [f"joint_{i}" for i in range(7)]
+GRIPPER_NAMES = ["gripper_left", "gripper_right"]
 
 
 def data_path(ep: int) -> str:
@@ -51,6 +57,8 @@ def features(size: int) -> dict:
     out = {k: {"dtype": "video", "shape": [size, size, 3], "names": ["height", "width", "channel"], "info": video_info}
            for k in VIDEO_KEYS}
     out["observation.state"] = {"dtype": "float32", "shape": [8], "names": STATE_NAMES}
+    out[JOINT_KEY] = {"dtype": "float32", "shape": [7], "names": JOINT_NAMES}
+    out[GRIPPER_KEY] = {"dtype": "float32", "shape": [2], "names": GRIPPER_NAMES}
     out["action"] = {"dtype": "float32", "shape": [7], "names": ACTION_NAMES}
     for k in ("timestamp",):
         out[k] = {"dtype": "float32", "shape": [1], "names": None}
@@ -65,6 +73,8 @@ class LeRobotFrame(BaseModel):
     model_config = ConfigDict(extra="forbid", populate_by_name=True)
 
     observation_state: Annotated[list[F32], Len(8, 8)] = Field(alias="observation.state")
+    joint_state: Annotated[list[F32], Len(7, 7)] = Field(alias=JOINT_KEY)
+    gripper_state: Annotated[list[F32], Len(2, 2)] = Field(alias=GRIPPER_KEY)
     action: Annotated[list[F32], Len(7, 7)]
     timestamp: F32
     frame_index: I64
@@ -77,7 +87,10 @@ class LeRobotFrame(BaseModel):
 FRAME_SCHEMA = arrow_schema(LeRobotFrame, metadata=None, nullable=True)
 
 
-def frame_table(states: np.ndarray, actions: np.ndarray, ep: int, start: int, task_index: int) -> pa.Table:
+def frame_table(states: np.ndarray, actions: np.ndarray, ep: int, start: int, task_index: int,
+                joints: np.ndarray) -> pa.Table:
+    """`states`: the 8-D end-effector states (their last two: the fingers); `joints`: the
+    arm's 7 joint positions per frame."""
     n = len(states)
 
     def fixed(a: np.ndarray) -> pa.FixedSizeListArray:
@@ -86,6 +99,8 @@ def frame_table(states: np.ndarray, actions: np.ndarray, ep: int, start: int, ta
 
     return pa.table({
         "observation.state": fixed(states),
+        JOINT_KEY: fixed(joints),
+        GRIPPER_KEY: fixed(np.asarray(states)[:, 6:8]),
         "action": fixed(actions),
         "timestamp": pa.array(np.arange(n, dtype=np.float32) / FPS, pa.float32()),
         "frame_index": pa.array(np.arange(n), pa.int64()),

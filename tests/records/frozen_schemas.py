@@ -221,7 +221,11 @@ LOCALIZATION_SCHEMA = pa.schema(
 
 # a LeRobot data file, as pyarrow inferred it from the frame arrays
 LEROBOT_FRAME_SCHEMA = pa.schema([
-    pa.field("observation.state", pa.list_(pa.float32(), 8)), pa.field("action", pa.list_(pa.float32(), 7)),
+    pa.field("observation.state", pa.list_(pa.float32(), 8)),
+    # issue 24: the arm's joint states beside the end-effector state
+    pa.field("observation.states.joint_state", pa.list_(pa.float32(), 7)),
+    pa.field("observation.states.gripper_state", pa.list_(pa.float32(), 2)),
+    pa.field("action", pa.list_(pa.float32(), 7)),
     pa.field("timestamp", pa.float32()), pa.field("frame_index", pa.int64()), pa.field("episode_index", pa.int64()),
     pa.field("index", pa.int64()), pa.field("task_index", pa.int64()),
 ])
