@@ -143,7 +143,7 @@ def evaluate(config: Path = CONFIG, dry_run: bool = DRY,
         if split not in ("eval", "train", "all"):
             err.print(f"[red]--split[/red] must be eval, train or all, got {split!r}")
             raise typer.Exit(2)
-        cfg.eval.split = split
+        cfg = cfg.model_copy(update={"eval": cfg.eval.model_copy(update={"split": split})})
     if dry_run:
         import yaml
 

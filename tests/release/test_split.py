@@ -107,3 +107,17 @@ def test_the_card_counts_libero_100_from_its_halves_and_each_scene_once_in_the_t
     assert "| *libero_100* | 2 | 2 | 2 | 2 | 8 |" in card
     assert "| **total** | 5 | 5 | 5 | 5 | 20 |" in card
     assert "16 evaluation" in card and "## Train / eval split" in card
+
+
+def test_recover_eval_split_flag_overrides_the_config_and_refuses_other_values(tmp_path):
+    import yaml
+    from typer.testing import CliRunner
+
+    from pipeline.cli import app
+
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text(yaml.safe_dump({"run": {"output_dir": str(tmp_path / "run")}}))
+    shown = CliRunner().invoke(app, ["eval", "--config", str(cfg), "--split", "all", "--dry-run"])
+    assert shown.exit_code == 0 and yaml.safe_load(shown.output)["eval"]["split"] == "all"
+    bad = CliRunner().invoke(app, ["eval", "--config", str(cfg), "--split", "test"])
+    assert bad.exit_code == 2
