@@ -315,6 +315,10 @@ class SplitConfig(_Strict):
 class ReleaseConfig(_Strict):
     output_dir: Path | None = None  # default: <run.output_dir>/release
     split: SplitConfig = SplitConfig()  # train/eval split of the released scenes (release/split.py)
+    # more run folders (other generators or seeds over the same task selection) whose final
+    # reviewed scenes join this run's in one release; episode keys must stay unique
+    # (`stage1.policy.name` tells generators apart), scenes record their generator
+    merge_runs: list[Path] = Field(default_factory=list)
     certify_tries: int = Field(default=2, ge=0)  # expert tries per scene; 0 = skip
     # steps per certificate try: the horizon `recover eval` gives a policy from a scene
     # (eval.horizon, and the benchmark's own task horizon, 520), so "certified" means a

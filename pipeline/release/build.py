@@ -1,6 +1,7 @@
 """`recover release`: assemble the scenario set from final reviewed annotations.
 
-Inputs: the run folder (see `pipeline.release.sources`) and `cfg.release`.
+Inputs: the run folder (see `pipeline.release.sources`), the run folders of
+`release.merge_runs` (other generators or seeds, same task selection) and `cfg.release`.
 Output folder (default `<run>/release/`):
     selected_bddl_scenes_<suite>/<task>/episode_<id>/step_<NNNN>.bddl
                                                     step_<NNNN>_sim_state.npy
@@ -26,7 +27,8 @@ from rich.console import Console
 
 from pipeline.atomic import write_bytes, write_json, write_text
 from pipeline.config import Config
-from pipeline.layout import RELEASE_BUILD, RELEASE_CARD, RELEASE_SPLIT, RELEASE_SUMS, SCENE_PREFIX, STATE_SUFFIX, ReleaseLayout, RunLayout
+from pipeline.errors import FatalError
+from pipeline.layout import RESOLVED_CONFIG, RELEASE_BUILD, RELEASE_CARD, RELEASE_SPLIT, RELEASE_SUMS, SCENE_PREFIX, STATE_SUFFIX, ReleaseLayout, RunLayout
 from pipeline.release.card import FIGURE, render_card, write_figure
 from pipeline.release.certify import certify_all, scene_refs
 from pipeline.release.manifest import MANIFEST_NAME, ScenarioRow, sha256_file, write_manifest
@@ -76,7 +78,7 @@ def _row(item: ReleaseItem, out: Path, bddl: str, state: str, history: list[str]
         init_state=ep.init_state, step=item.step, fail_time_s=a.fail_time_s, fail_step=a.fail_step,
         level=a.recovery_level, category=a.failure_category, recovery_action=a.recovery_action,
         policy=ep.policy,
-        policy_kind=ep.policy_kind, seed=ep.seed, localize_prompt_hash=loc.prompt_hash,
+        policy_kind=ep.policy_kind, generator=ep.generator, seed=ep.seed, localize_prompt_hash=loc.prompt_hash,
         characterize_prompt_hash=char_hash, reviewers=len({r.reviewer for r in a.reviews}),
         adjudicated=a.adjudication is not None, state_dim=state_dim,
         bddl_path=bddl, bddl_sha256=sha256_file(out / bddl), state_path=state,
@@ -97,12 +99,44 @@ def _remove_stale(out: Path, keep: set[str]) -> int:
     return removed
 
 
+def _tasks_of(run: Path) -> dict | None:
+    import yaml
+
+    resolved = RunLayout(run).stage1.root / RESOLVED_CONFIG
+    return (yaml.safe_load(resolved.read_text()) or {}).get("tasks") if resolved.is_file() else None
+
+
+def gather_runs(cfg: Config) -> tuple[list[ReleaseItem], list[QuarantineEntry]]:
+    """The release items of this run and of `release.merge_runs`: same task selection (from
+    each run's resolved stage-1 config, where it has one), every episode key once."""
+    runs = [Path(cfg.out)] + [Path(r) for r in cfg.release.merge_runs]
+    items, skipped, origin = [], [], {}
+    for run in runs:
+        if not run.is_dir():
+            raise FatalError(f"release.merge_runs: {run}: no such run folder")
+        if run != runs[0] and (theirs := _tasks_of(run)) is not None and (ours := _tasks_of(runs[0])) is not None \
+                and theirs != ours:
+            raise FatalError(f"release.merge_runs: {run} selects other tasks than {runs[0]} (stage1/{RESOLVED_CONFIG}"
+                             f" `tasks`: {theirs} vs {ours}); a merged release covers one task selection")
+        got, left = gather(run, cfg.stage2)
+        for it in got:
+            key = it.annotation.key
+            if key in origin:
+                raise FatalError(f"release.merge_runs: episode {key} is in both {origin[key]} and {run}; give the "
+                                 f"generators different names (stage1.policy.name) or seeds")
+            origin[key] = run
+        items += got
+        skipped += left
+    items.sort(key=lambda it: (it.episode.suite, it.episode.task, it.episode.episode_id))
+    return items, skipped
+
+
 def build(cfg: Config, console: Console | None = None, executor: Executor | None = None) -> list[ScenarioRow]:
     import numpy as np
 
     console = console or Console()
     out = release_dir(cfg)
-    items, skipped = gather(cfg.out, cfg.stage2)
+    items, skipped = gather_runs(cfg)
     rows = []
     for item in items:
         try:  # a state that does not load is set aside here; verify checks the rest

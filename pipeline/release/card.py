@@ -40,6 +40,7 @@ def portable_config(cfg: Config) -> dict:
     d = cfg.model_dump(mode="json")
     d["run"]["output_dir"] = "<run>"
     d["release"]["output_dir"] = None
+    d["release"]["merge_runs"] = [f"<run>/../{Path(r).name}" for r in d["release"].get("merge_runs", [])]
     for stage in ("stage3",):
         if d[stage].get("db_url"):
             d[stage]["db_url"] = "<redacted>"
@@ -123,6 +124,19 @@ def _split_section(rows: list[ScenarioRow], cfg: Config) -> str:
             f"and `split.json` record it; `recover verify` redraws it.\n\n" + "\n\n".join(blocks))
 
 
+def _generators(rows: list[ScenarioRow]) -> str:
+    """Scenes per generator (`kind:name@params hash`) and split: a merged release has several."""
+    gens = sorted({r.generator or f"{r.policy_kind}:{r.policy}" for r in rows})
+    body = []
+    for g in gens:
+        part = [r for r in rows if (r.generator or f"{r.policy_kind}:{r.policy}") == g]
+        body.append([f"`{g}`", len(part), sum(r.split == "train" for r in part), sum(r.split == "eval" for r in part)])
+    return (_table(["generator (kind:name@params hash)", "scenes", "train", "eval"], body or [["(none)", 0, 0, 0]])
+            + "\n\nThe hash is of the generator's recorded parameters (`policy_params` in the source run's"
+            "\n`stage1/episodes.parquet`: noise levels, server, checkpoint); `release.merge_runs` merges\nthe "
+            "scenes of several runs (generators or seeds) into one release.")
+
+
 def render_card(rows: list[ScenarioRow], cfg: Config, prompt_hashes: dict[str, list[str]], reviewers: int) -> str:
     by_cat = Counter(r.category for r in rows)
     certified = sum(r.certified is True for r in rows)
@@ -173,6 +187,10 @@ dimensions of the reference (4 suites x 4 levels). The total counts each scene o
 ## Scenes per failure category
 
 {_table(["category", "scenes"], cat_rows)}
+
+## Scenes per failure generator
+
+{_generators(rows)}
 
 ## Recoverability certificate
 

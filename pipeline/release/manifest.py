@@ -60,6 +60,9 @@ class ScenarioRow(BaseModel):
     # train (recovery demonstrations) or eval (held out), `pipeline.release.split`; None in
     # a release built before the split
     split: Split | None = None
+    # the failure generator of the source episode (`EpisodeRecord.generator`: kind, name and
+    # a hash of its parameters); a release merged from several runs has several
+    generator: str | None = None
 
     def files(self) -> list[tuple[str, str]]:
         """(relative path, sha256) of every released file of this scene."""
@@ -71,7 +74,7 @@ class ScenarioRow(BaseModel):
 SCENARIO_SCHEMA = arrow_schema(ScenarioRow, metadata={**SCHEMA_METADATA, "name": "libero-recover scenarios"})
 
 # columns a release built before them lacks; such a manifest still reads (they are None)
-ADDED_LATER = {"certify_reason", "split"}
+ADDED_LATER = {"certify_reason", "split", "generator"}
 
 
 def sha256_file(path: str | Path) -> str:

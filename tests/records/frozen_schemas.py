@@ -107,6 +107,7 @@ SCENARIO_SCHEMA = pa.schema(
         # column not in the hand-written schema, declared nullable so older manifests still read
         pa.field("certify_reason", pa.string()),
         pa.field("split", pa.string()),  # issue 24: train / eval
+        pa.field("generator", pa.string()),  # issue 24: kind:name@params hash of the source episode
     ],
     metadata={"schema_version": str(SCHEMA_VERSION), "name": "libero-recover scenarios"},
 )

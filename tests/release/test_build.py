@@ -85,3 +85,34 @@ def test_release_never_includes_episodes_without_a_final_annotation(run):
         f.unlink()
     assert build(release_config(run)) == []
     assert not list((run / "release").glob("selected_bddl_scenes_*/**/*.npy"))
+
+
+def test_two_generators_merge_into_one_release_that_verifies_and_rebuilds_identically(tmp_path, scene_source):
+    from pipeline.errors import FatalError
+    from pipeline.release.verify import verify_release
+
+    good, bddl = npy_bytes(scene_source.failure), scene_source.bddl_text
+    # the scripted expert at two noise levels, as two runs of one task selection
+    a = make_run(tmp_path / "a", scene_source, {"scripted-i00-s0": (good, bddl)}, policy_params={"noise": 0.1})
+    b = make_run(tmp_path / "b", scene_source, {"noisy-i00-s0": (good, bddl), "noisy-i00-s1": (good, bddl)},
+                 policy="noisy", policy_params={"noise": 0.3})
+    cfg = release_config(a, merge_runs=[str(b)])
+    rows = build(cfg)
+    gens = {r.episode_id: r.generator for r in rows}
+    assert sorted(gens) == ["noisy-i00-s0", "noisy-i00-s1", "scripted-i00-s0"]
+    assert gens["scripted-i00-s0"].startswith("scripted:scripted@") and gens["noisy-i00-s0"].startswith("scripted:noisy@")
+    assert gens["noisy-i00-s0"] == gens["noisy-i00-s1"] != gens["scripted-i00-s0"]
+    out = a / "release"
+    card = (out / "README.md").read_text()
+    assert f"| `{gens['noisy-i00-s0']}` | 2 |" in card and f"| `{gens['scripted-i00-s0']}` | 1 |" in card
+    assert str(tmp_path) not in card  # the merged runs' folders are named, not located
+    reports, problems = verify_release(out, cfg.release)
+    assert problems == [] and all(r.ok for r in reports), [p for r in reports for p in r.problems]
+    sums = (out / "SHA256SUMS").read_bytes()
+    shutil.rmtree(out)
+    build(cfg)
+    assert (out / "SHA256SUMS").read_bytes() == sums  # rebuilt byte for byte
+    # the same episode key in two runs cannot both be released
+    c = make_run(tmp_path / "c", scene_source, {"scripted-i00-s0": (good, bddl)})
+    with pytest.raises(FatalError, match="in both"):
+        build(release_config(a, merge_runs=[str(c)]))
