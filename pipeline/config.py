@@ -172,6 +172,10 @@ class PolicyConfig(_Strict):
     name: str | None = None  # recorded with each episode; defaults to kind
     scripted: ScriptedPolicyConfig = ScriptedPolicyConfig()
     openpi: OpenpiPolicyConfig = OpenpiPolicyConfig()
+    # eval only: this policy's temporal context, in place of eval.temporal_context, so one
+    # server is evaluated without context, with the initial frame and with the history side
+    # by side (three entries with three names: one report row each)
+    temporal_context: Literal["none", "initial_frame", "history"] | None = None
 
 
 class VideoConfig(_Strict):

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from pipeline.config import Config, PolicyConfig
+from pipeline.config import Config, EvalConfig, PolicyConfig
 from pipeline.eval.protocol import Trial
 from pipeline.eval.rd import episode_dir, rd_starts, stage2_phases
 from pipeline.eval.scenes import Scene
@@ -22,6 +22,11 @@ from pipeline.layout import RunLayout
 
 def policy_name(p: PolicyConfig) -> str:
     return p.name or p.kind
+
+
+def context_of(p: PolicyConfig, e: EvalConfig) -> str:
+    """The temporal context a policy is evaluated with: its own, else `eval.temporal_context`."""
+    return p.temporal_context or e.temporal_context
 
 
 def default_scenes_dir(cfg: Config) -> Path:
@@ -44,15 +49,17 @@ def plan_trials(cfg: Config, scenes: list[Scene]) -> tuple[list[Trial], list[str
     """All trials of the run, and problems (scenes without a usable source rollout for RD)."""
     e = cfg.eval
     common = dict(seed=cfg.run.seed, horizon=e.horizon, max_offset_m=e.max_offset_m,
-                  gripper_settle_steps=e.gripper_settle_steps, temporal_context=e.temporal_context)
+                  gripper_settle_steps=e.gripper_settle_steps)
     trials: list[Trial] = []
+    context = {policy_name(p): context_of(p, e) for p in e.policies}
     for p in e.policies:
         for chunk in e.chunk_sizes:
             for s in scenes:
                 for g in e.gripper_conditions:
                     for t in range(e.trials_per_condition):
                         trials.append(Trial(scene=s, policy=policy_name(p), policy_kind=p.kind, gripper=g,
-                                            trial=t, chunk_size=chunk, **common))
+                                            trial=t, chunk_size=chunk,
+                                            temporal_context=context[policy_name(p)], **common))
     problems: list[str] = []
     if e.rd:
         starts = {}
@@ -76,7 +83,7 @@ def plan_trials(cfg: Config, scenes: list[Scene]) -> tuple[list[Trial], list[str
                         trials.append(Trial(scene=s, policy=policy_name(p), policy_kind=p.kind,
                                             gripper=start.gripper, trial=t, chunk_size=e.chunk_sizes[0],
                                             mode="rd", rd_phase=start.phase, rd_start_step=start.start_step,
-                                            rd_folder=folder, **common))
+                                            rd_folder=folder, temporal_context=context[policy_name(p)], **common))
     ids = [t.unit_id for t in trials]
     if len(set(ids)) != len(ids):
         raise ValueError("eval plan has duplicate unit ids (duplicate policy names in eval.policies?)")

@@ -92,8 +92,9 @@ def compute(rows: list[MetricRow], ecfg: EvalConfig) -> dict:
 KIND_LABEL = {"scripted": "scripted expert (reference)", "recovery": "recovery expert (reference)"}
 
 
-def summary_table(rows: list[MetricRow], data: dict) -> str:
-    """RSR per policy x level, one row per policy: the experts sit beside the evaluated policies."""
+def summary_table(rows: list[MetricRow], data: dict, contexts: dict[str, str] | None = None) -> str:
+    """RSR per policy x level, one row per policy: the experts sit beside the evaluated policies,
+    and a policy evaluated with several temporal contexts (one name each) has a row per variant."""
     main = M.select(rows, mode="scene", chunk_size=data["chunk_size"])
     lvls = _levels(main)
     body = []
@@ -101,8 +102,18 @@ def summary_table(rows: list[MetricRow], data: dict) -> str:
         sel = M.select(main, policy=pol)
         kinds = sorted({r.policy_kind or "" for r in sel} - {""})
         kind = ", ".join(KIND_LABEL.get(k, k) for k in kinds) or "—"
-        body.append([f"`{pol}`", kind] + [_cell(sel, level=lv) for lv in lvls] + [_cell(sel)])
-    return _table(["policy", "kind"] + [lv or "unlabeled" for lv in lvls] + ["all"], body)
+        ctx = [(contexts or {}).get(pol, "none")] if contexts else []
+        body.append([f"`{pol}`", kind] + ctx + [_cell(sel, level=lv) for lv in lvls] + [_cell(sel)])
+    return _table(["policy", "kind"] + (["temporal context"] if contexts else []) + [lv or "unlabeled" for lv in lvls]
+                  + ["all"], body)
+
+
+def _contexts(ecfg: EvalConfig) -> dict[str, str] | None:
+    """policy name -> its temporal context, when any policy is evaluated with one."""
+    from pipeline.eval.plan import context_of, policy_name
+
+    ctx = {policy_name(p): context_of(p, ecfg) for p in ecfg.policies}
+    return ctx if any(v != "none" for v in ctx.values()) else None
 
 
 def _name(suite: str, members: tuple[str, ...]) -> str:
@@ -118,7 +129,7 @@ def markdown(rows: list[MetricRow], ecfg: EvalConfig, data: dict, header: str = 
              *(["*libero_100* is LIBERO-100, libero_10 and libero_90 together: its rates pool their trials "
                 "(not an average of the two rates).\n"] if any(m != (s,) for s, m in groups) else []),
              "\n## RSR per policy × level\n\nThe experts read privileged simulator state: they are references "
-             "(what a competent recovering policy scores), not contestants.\n\n", summary_table(rows, data)]
+             "(what a competent recovering policy scores), not contestants.\n\n", summary_table(rows, data, _contexts(ecfg))]
     for pol, res in data["policies"].items():
         main = M.select(rows, policy=pol, chunk_size=chunk)
         lvls = _levels(main)

@@ -62,3 +62,26 @@ def test_libero_100_is_pooled_from_trials_beside_its_halves(tmp_path):
     assert metrics["policies"]["scripted"]["rd"]["libero_100"]["m_during"] == 1.0
     assert "| suite | M_pre | M_during | M_post | RD |" in md
     assert (tmp_path / "rd_phases.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_each_policy_entry_runs_with_its_own_temporal_context_and_gets_a_report_row(tmp_path):
+    from pathlib import Path
+
+    from pipeline.config import Config
+    from pipeline.eval.plan import plan_trials
+    from pipeline.eval.scenes import Scene
+
+    names = {"pi-none": "none", "pi-initial": "initial_frame", "pi-history": "history"}
+    cfg = Config.model_validate({"run": {"output_dir": str(tmp_path)}, "eval": {
+        "rd": False, "trials_per_condition": 1, "gripper_conditions": ["open"], "temporal_context": "initial_frame",
+        "policies": [{"kind": "openpi", "name": "pi-none", "temporal_context": "none"},
+                     {"kind": "openpi", "name": "pi-initial"},  # eval.temporal_context
+                     {"kind": "openpi", "name": "pi-history", "temporal_context": "history"}]}})
+    scene = Scene("libero_goal", "t", "scripted-i00-s0", 40, Path("s.bddl"), Path("s.npy"))
+    trials, _ = plan_trials(cfg, [scene])
+    assert {t.policy: t.temporal_context for t in trials} == names
+    write_report([row(True, policy=n) for n in names], cfg.eval, tmp_path)
+    md = (tmp_path / "report.md").read_text()
+    assert "| policy | kind | temporal context |" in md
+    for name, ctx in names.items():
+        assert f"| `{name}` | — | {ctx} |" in md
