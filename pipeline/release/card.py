@@ -119,8 +119,9 @@ def _split_section(rows: list[ScenarioRow], cfg: Config) -> str:
             f"the demonstrations is not scored on its own training scenes. A scene is train when\n"
             f"SHA-256(\"split/<seed>/<scene id>\") read as a number in [0, 1) is below the train share\n"
             f"(seed {sp.seed}, train share {sp.train_share}): uniform within every suite x level, the same for\n"
-            f"the same seed, and unchanged for existing scenes when scenes are added; a suite x level with\n"
-            f"two or more scenes always keeps one eval scene. The column `split` of `scenarios.parquet`\n"
+            f"the same seed, and unchanged for existing scenes when scenes are added; a suite with two or\n"
+            f"more scenes always gets one train scene, and a suite x level with two or more scenes keeps\n"
+            f"one eval scene. The column `split` of `scenarios.parquet`\n"
             f"and `split.json` record it; `recover verify` redraws it.\n\n" + "\n\n".join(blocks))
 
 

@@ -9,9 +9,12 @@ scene's score is u = SHA-256("split/<seed>/<scene id>") read as a number in [0, 
 so the same release and seed give the same split, and a release that adds scenes (more
 episodes, another generator) leaves every existing scene on its side. Sampling is uniform
 within each suite x level stratum (the expected train share is `train_share` in each), as
-the reference samples its recovery scenes uniformly over the suites. One correction keeps
-the evaluation set covering every stratum: in a stratum of >= 2 scenes that drew no eval
-scene, the scene with the highest score goes to eval.
+the reference samples its recovery scenes uniformly over the suites. Two corrections keep
+both sides covering the release when it is small: a suite of >= 2 scenes that drew no train
+scene gets its lowest-scored scene as train (unless train_share is 0), and a suite x level of
+>= 2 scenes that drew no eval scene gives its highest-scored scene to eval. Only these
+corrections can move an existing scene when scenes are added (back to its drawn side, once
+its suite or stratum draws one of each side by itself).
 """
 
 from __future__ import annotations
@@ -27,7 +30,7 @@ from pipeline.layout import episode_key, scene_id
 from pipeline.release.manifest import ScenarioRow
 from pipeline.vocab import Split
 
-METHOD = "sha256-threshold/suite-level/v1"
+METHOD = "sha256-threshold/suite-level/v2"
 
 
 class SplitInfo(BaseModel):
@@ -55,10 +58,16 @@ def assign(rows: Sequence[ScenarioRow], cfg: SplitConfig) -> list[Split]:
     """The side of each row, in the rows' order."""
     scores = [score(cfg.seed, row_scene_id(r)) for r in rows]
     sides = [Split.train if u < cfg.train_share else Split.eval for u in scores]
+    suites: dict[str, list[int]] = defaultdict(list)
     strata: dict[tuple[str, str], list[int]] = defaultdict(list)
     for i, r in enumerate(rows):
+        suites[r.suite].append(i)
         strata[(r.suite, str(r.level))].append(i)
-    for idx in strata.values():
+    if cfg.train_share > 0:  # every suite gets demonstrations
+        for idx in suites.values():
+            if len(idx) >= 2 and not any(sides[i] is Split.train for i in idx):
+                sides[min(idx, key=lambda i: scores[i])] = Split.train
+    for idx in strata.values():  # every suite x level stays in the evaluation
         if len(idx) >= 2 and all(sides[i] is Split.train for i in idx):
             sides[max(idx, key=lambda i: scores[i])] = Split.eval
     return sides

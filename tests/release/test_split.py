@@ -55,6 +55,12 @@ def test_adding_scenes_leaves_every_existing_scene_on_its_side():
     assert assign(new, cfg)[: len(old)] == assign(old, cfg)
 
 
+def test_every_suite_of_two_or_more_scenes_gets_a_train_scene_unless_the_share_is_zero():
+    rows = [_row("libero_goal", i, ("L1", "L2", "L3")[i % 3]) for i in range(3)]
+    assert sum(s == "train" for s in assign(rows, SplitConfig(train_share=1e-9))) == 1
+    assert set(assign(rows, SplitConfig(train_share=0.0))) == {"eval"}
+
+
 def test_a_stratum_of_two_or_more_keeps_an_eval_scene_even_at_share_one():
     rows = [_row("libero_goal", 0), _row("libero_goal", 1), _row("libero_10", 2, "L3")]
     sides = assign(rows, SplitConfig(train_share=1.0))
