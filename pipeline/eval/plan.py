@@ -40,9 +40,16 @@ def stage1_dir(cfg: Config) -> Path:
     return Path(cfg.eval.stage1_dir) if cfg.eval.stage1_dir else RunLayout.of(cfg).stage1.root
 
 
-def stage2_dir(cfg: Config) -> Path:
+def stage2_dir(stage1: Path) -> Path:
     """Stage 2 beside the stage-1 folder the RD reruns come from: its phases label them."""
-    return RunLayout(stage1_dir(cfg).parent).stage2.root
+    return RunLayout(Path(stage1).parent).stage2.root
+
+
+def source_stage1(cfg: Config, s: Scene) -> Path:
+    """The stage-1 folder holding a scene's source rollout: this run's (or `eval.stage1_dir`),
+    else that of the `release.merge_runs` run it came from; the first one if none has it."""
+    candidates = [stage1_dir(cfg)] + [RunLayout(Path(r)).stage1.root for r in cfg.release.merge_runs]
+    return next((c for c in candidates if episode_dir(c, s.suite, s.task, s.episode_id).is_dir()), candidates[0])
 
 
 def plan_trials(cfg: Config, scenes: list[Scene]) -> tuple[list[Trial], list[str]]:
@@ -64,9 +71,10 @@ def plan_trials(cfg: Config, scenes: list[Scene]) -> tuple[list[Trial], list[str
     if e.rd:
         starts = {}
         for s in scenes:
-            folder = episode_dir(stage1_dir(cfg), s.suite, s.task, s.episode_id)
+            stage1 = source_stage1(cfg, s)
+            folder = episode_dir(stage1, s.suite, s.task, s.episode_id)
             try:
-                phases = stage2_phases(stage2_dir(cfg), s.source_key)
+                phases = stage2_phases(stage2_dir(stage1), s.source_key)
                 # the onset: a released scene's reviewed one; a stage-2 scene's, its phases'
                 onset = s.step if phases is None else s.fail_step if s.fail_step is not None else phases.during[0]
                 starts[s] = (folder, rd_starts(folder, onset, e.rd_every_steps, phases))
@@ -74,7 +82,7 @@ def plan_trials(cfg: Config, scenes: list[Scene]) -> tuple[list[Trial], list[str
                 problems.append(f"RD skipped for {s.scene_id}: {err}")
                 continue
             if phases is None:
-                problems.append(f"RD of {s.scene_id}: no stage-2 phases (localization) in {stage2_dir(cfg)}: "
+                problems.append(f"RD of {s.scene_id}: no stage-2 phases (localization) in {stage2_dir(stage1)}: "
                                 f"starts labelled pre / post at the scene step only")
         for p in e.policies:
             for s, (folder, st) in starts.items():

@@ -85,3 +85,40 @@ def test_each_policy_entry_runs_with_its_own_temporal_context_and_gets_a_report_
     assert "| policy | kind | temporal context |" in md
     for name, ctx in names.items():
         assert f"| `{name}` | — | {ctx} |" in md
+
+
+def test_rd_of_a_merged_runs_scene_reads_that_runs_rollout_and_stage2_phases(tmp_path):
+    """A scene released from `release.merge_runs`: its RD starts come from its own run's
+    stage 1, labelled by its own run's stage-2 phases (moved to the reviewed onset)."""
+    from pathlib import Path
+
+    import numpy as np
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from pipeline.config import Config
+    from pipeline.eval.plan import plan_trials
+    from pipeline.eval.scenes import Scene
+    from pipeline.layout import RunLayout
+    from pipeline.records import Localization, Phases
+
+    other = RunLayout(tmp_path / "other")
+    key = "libero_goal/t/noisy-i00-s0"
+    folder = other.stage1.episode_dir(key)
+    folder.mkdir(parents=True)
+    np.save(folder / "states.npy", np.zeros((101, 5)))
+    pq.write_table(pa.table({"action": [[0.0] * 7] * 100}), folder / "steps.parquet")
+    loc = other.stage2.localization_of_key(key)
+    loc.parent.mkdir(parents=True)
+    loc.write_text(Localization(key=key, suite="libero_goal", task="t", episode_id="noisy-i00-s0", instruction="i",
+                                source="simstate", fail_time_s=2.25, fail_step=45,
+                                phases=Phases(pre=(0, 45), during=(45, 70), post=(70, 101)),
+                                scene_bddl="x.bddl", scene_state="x.npy").model_dump_json())
+    cfg = Config.model_validate({"run": {"output_dir": str(tmp_path / "main")},
+                                 "release": {"merge_runs": [str(other.root)]},
+                                 "eval": {"trials_per_condition": 1, "gripper_conditions": ["open"]}})
+    scene = Scene("libero_goal", "t", "noisy-i00-s0", 75, Path("s.bddl"), Path("s.npy"), fail_step=50)
+    trials, problems = plan_trials(cfg, [scene])
+    rd = sorted({(t.rd_start_step, t.rd_phase) for t in trials if t.mode == "rd"})
+    assert rd == [(0, "pre"), (20, "pre"), (40, "pre"), (60, "during"), (80, "post"), (100, "post")]
+    assert problems == []
