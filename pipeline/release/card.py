@@ -40,7 +40,9 @@ def portable_config(cfg: Config) -> dict:
     d = cfg.model_dump(mode="json")
     d["run"]["output_dir"] = "<run>"
     d["release"]["output_dir"] = None
-    d["release"]["merge_runs"] = [f"<run>/../{Path(r).name}" for r in d["release"].get("merge_runs", [])]
+    # located elsewhere and renamed by `recover reproduce`: counted, not named (the generator
+    # table says what each contributed)
+    d["release"]["merge_runs"] = [f"<merged run {i + 1}>" for i in range(len(d["release"].get("merge_runs", [])))]
     for stage in ("stage3",):
         if d[stage].get("db_url"):
             d[stage]["db_url"] = "<redacted>"
