@@ -37,8 +37,8 @@ from rich.console import Console
 from pipeline.atomic import Completions, write_json, write_with
 from pipeline.config import Config
 from pipeline.errors import ConfigError, FatalError
-from pipeline.layout import EpisodeFiles, RunLayout, episode_key
-from pipeline.records import read_episodes
+from pipeline.layout import EpisodeFiles, RunLayout, Stage1Layout, episode_key
+from pipeline.records import EpisodeRecord, read_episodes
 from pipeline.release import lerobot_format as fmt
 from pipeline.release.manifest import MANIFEST_NAME
 from pipeline.release.scene_physics import scene_task
@@ -133,12 +133,17 @@ def eval_episode_keys(manifest: Path) -> set[str]:
     return {episode_key(r.suite, r.task, r.episode_id) for r in read_manifest(manifest) if r.split == "eval"}
 
 
+def stage1_episodes(cfg: Config) -> list[tuple[Stage1Layout, EpisodeRecord]]:
+    """(stage-1 layout, episode) of this run and of every `release.merge_runs` run."""
+    layouts = [RunLayout.of(cfg).stage1] + [RunLayout(Path(r)).stage1 for r in cfg.release.merge_runs]
+    return [(st, e) for st in layouts for e in read_episodes(st.manifest)]
+
+
 def rollout_episodes(cfg: Config) -> list[ExportEpisode]:
     layout = RunLayout.of(cfg)
-    stage1 = layout.stage1
     held_out = eval_episode_keys(layout.release.manifest)
     out = []
-    for e in read_episodes(stage1.manifest):
+    for stage1, e in stage1_episodes(cfg):
         if cfg.release.lerobot_episodes == "failures" and e.success:
             continue
         out.append(ExportEpisode(e.key, e.suite, e.task, e.instruction, stage1.episode(e).dir, e.steps,
@@ -151,11 +156,10 @@ def history_episodes(cfg: Config, manifest: Path) -> list[ExportEpisode]:
 
     if not manifest.is_file():
         return []
-    stage1 = RunLayout.of(cfg).stage1
-    eps = {e.key: e for e in read_episodes(stage1.manifest)}
+    eps = {e.key: (stage1, e) for stage1, e in stage1_episodes(cfg)}  # merged runs' too
     out = []
     for r in read_manifest(manifest):
-        e = eps.get(episode_key(r.suite, r.task, r.episode_id))
+        stage1, e = eps.get(episode_key(r.suite, r.task, r.episode_id), (None, None))
         if e is not None and r.fail_step >= 1:
             out.append(ExportEpisode(f"{e.key}@{r.step}", r.suite, r.task, r.instruction, stage1.episode(e).dir,
                                      min(r.fail_step, e.steps), split="eval" if r.split == "eval" else "train"))

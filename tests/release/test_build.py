@@ -106,6 +106,11 @@ def test_two_generators_merge_into_one_release_that_verifies_and_rebuilds_identi
     card = (out / "README.md").read_text()
     assert f"| `{gens['noisy-i00-s0']}` | 2 |" in card and f"| `{gens['scripted-i00-s0']}` | 1 |" in card
     assert str(tmp_path) not in card  # the merged runs' folders are named, not located
+    # the LeRobot rollouts and pre-failure histories take each run's own stage 1
+    from pipeline.release.lerobot_export import history_episodes, rollout_episodes
+
+    assert sorted(e.key.rsplit("/", 1)[1] for e in rollout_episodes(cfg)) == sorted(gens)
+    assert {e.folder.parts[len(tmp_path.parts)] for e in history_episodes(cfg, out / "scenarios.parquet")} == {"a", "b"}
     reports, problems = verify_release(out, cfg.release)
     assert problems == [] and all(r.ok for r in reports), [p for r in reports for p in r.problems]
     sums = (out / "SHA256SUMS").read_bytes()
