@@ -105,9 +105,18 @@ def release(config: Path = CONFIG, dry_run: bool = DRY) -> None:
 
 
 @app.command()
-def verify(directory: Path = typer.Argument(..., help="a released scenario set")) -> None:
+def verify(directory: Path = typer.Argument(..., help="a released scenario set"),
+           config: Path = typer.Option(None, "--config", "-c",
+                                       help="run config: its release checks and executor (default: built-in, inline)")
+           ) -> None:
     """Check a scenario set: BDDL, states, restore, goal, settledness, checksums."""
-    code = _call("pipeline.release.verify:main", directory)
+    cfg = _load(config) if config is not None else None
+    executor = None
+    if cfg is not None:
+        from pipeline.executors import make_executor
+
+        executor = make_executor(cfg.executor)
+    code = _call("pipeline.release.verify:main", directory, cfg.release if cfg else None, executor=executor)
     raise typer.Exit(int(code or 0))
 
 

@@ -301,6 +301,8 @@ class Stage3Config(_Strict):
     reviews_per_item: int = Field(default=2, ge=1)  # K independent reviews per item
     time_tolerance_s: float = Field(default=0.5, ge=0)  # failure times agree within +-this
     lease_seconds: int = Field(default=900, ge=10)  # an absent reviewer's hold expires
+    lease_max_seconds: int = Field(default=3600, ge=10)  # renewals never hold an item longer
+    max_leases_per_person: int = Field(default=3, ge=1)  # items one person may hold at once
     host: str = "127.0.0.1"  # `recover review serve` (loopback unless you mean otherwise)
     port: int = Field(default=8765, ge=1, le=65535)
     # server processes; SQLite writes from all of them queue on one lock file (review/db.py)

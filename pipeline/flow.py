@@ -102,10 +102,9 @@ def _stage2(cfg: Config) -> Stage:
 
 
 def _stage3(cfg: Config) -> Stage:
-    from pipeline.review.server import engine_for
     from pipeline.stage3.run import Stage3
 
-    return Stage3(cfg, engine_for(cfg), None)
+    return Stage3(cfg)
 
 
 def _demos(cfg: Config) -> Stage:

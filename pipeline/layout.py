@@ -258,6 +258,11 @@ class Stage2Layout:
     def vlm(self, rec: EpisodeRecord) -> Path:
         return self._rel("vlm", rec, ".json")
 
+    @property
+    def vlm_dir(self) -> Path:
+        """The VLM step's answers, and its done markers (`_done/`)."""
+        return self.root / "vlm"
+
     def abs(self, rel: Path) -> Path:
         return self.root / rel
 
@@ -382,6 +387,11 @@ class ReleaseLayout:
     @property
     def quarantine_log(self) -> Path:
         return self.build_dir / QUARANTINE_LOG
+
+    @property
+    def verify_dir(self) -> Path:
+        """`recover verify`'s done markers, one per checked scene (`_done/`)."""
+        return self.build_dir / "verify"
 
     @staticmethod
     def scene_base(key: str, step: int) -> str:

@@ -11,7 +11,8 @@ Output folder (default `<run>/release/`):
     README.md, figures/      the dataset card (`pipeline.release.card`)
     SHA256SUMS               every released file above (`sha256sum -c SHA256SUMS` works)
     _build/                  NOT part of the set: build time, quarantined annotations, certificates
-                             (`_build/certificates/_done/`, see `pipeline.release.certify`)
+                             (`_build/certificates/_done/`, see `pipeline.release.certify`),
+                             `recover verify`'s results (`_build/verify/_done/`)
 Invariants: released bytes depend only on the inputs and the config (no timestamps, no
 absolute paths, sorted rows), so the same config and seed rebuild them byte for byte; scene
 files are copied unchanged; files of scenes no longer released are removed.

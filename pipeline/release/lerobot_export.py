@@ -34,7 +34,7 @@ import numpy as np
 import pyarrow.parquet as pq
 from rich.console import Console
 
-from pipeline.atomic import Completions, write_json, write_with
+from pipeline.atomic import write_json, write_with
 from pipeline.config import Config
 from pipeline.errors import ConfigError, FatalError
 from pipeline.layout import EpisodeFiles, RunLayout, Stage1Layout, episode_key
@@ -268,9 +268,10 @@ class ExportStage(Stage[ExportUnit]):
 def refuse_old_renders(stage: ExportStage, units: list[ExportUnit]) -> None:
     """An export resumed over episodes drawn by an older renderer would mix two looks in one
     training set (markers of those carry no renderer version): refuse, naming the fix."""
-    marks = Completions(stage.root)
-    old = [u for u in units if marks.is_done(stage.marker_id(u))
-           and (marks.info(stage.marker_id(u)) or {}).get("inputs") != stage.fingerprint(u)]
+    from pipeline.runner.runner import recorded_inputs
+
+    done = recorded_inputs(stage, units)
+    old = [u for u in units if stage.unit_id(u) in done and done[stage.unit_id(u)] != stage.fingerprint(u)]
     if old:
         raise FatalError(f"export-lerobot {Path(stage.dataset).name}: {len(old)} episode(s) in {stage.dataset} were "
                          f"rendered by an older renderer (robosuite's collision geometry; now version {RENDERER_VERSION}); "

@@ -10,7 +10,7 @@ Outputs: a FastAPI app. Routes, one router per resource under `routes/` (all JSO
   media:        GET /api/items/{id}/evidence, /frames   GET /media/<path under the run folder> (file)
   GET / (the page)
 Invariants: every route but login and the page needs a user (`deps`), the OpenAPI docs too;
-an item's reviews stay hidden while they are being collected (`workflow.open_reviews`);
+an item's reviews stay hidden while they are being collected (`blindness`);
 writes through the cookie need the CSRF header; errors are `{"detail", "field"?, "current"?}`
 with 401/403/404/409/415/422; a request body that fails the schema is a 422 whose `field`
 names the bad field, and no error repeats a secret (a token field, a whole body, a long value).
@@ -31,7 +31,7 @@ from sqlalchemy.engine import Engine
 
 from pipeline.review.deps import ServerContext
 from pipeline.review.errors import ReviewError
-from pipeline.review.limits import RequestLimits
+from pipeline.review.limits import Limits, RequestLimits
 from pipeline.review.routes import adjudication, admin, items, media, queue, session
 from pipeline.review.workflow import QueueSettings
 
@@ -102,14 +102,16 @@ class SecurityHeaders:
 
 
 def create_app(run_dir: str | Path, engine: Engine, settings: QueueSettings, ui_dir: Path = UI_DIR,
-               docs: bool = False) -> FastAPI:
+               docs: bool = False, limits: Limits = Limits()) -> FastAPI:
     # FastAPI's own docs routes answer anyone; ours (admin.docs_router) need a user
     app = FastAPI(title="libero-recover review", docs_url=None, redoc_url=None, openapi_url=None,
                   lifespan=_lifespan)
     app.state.review = ServerContext(Path(run_dir).resolve(), engine, settings)
     app.add_exception_handler(RequestValidationError, _validation_error)
-    app.add_exception_handler(ReviewError, lambda _r, e: JSONResponse(status_code=e.status, content=e.body()))
-    app.add_middleware(RequestLimits)  # before routing, authentication and parsing
+    app.add_exception_handler(ReviewError, lambda _r, e: JSONResponse(status_code=e.status, content=e.body(),
+                                                                          headers=e.headers()))
+    app.state.limits = limits  # the server's protocol takes its header limits from here (server.py)
+    app.add_middleware(RequestLimits, limits=limits)  # before routing, authentication and parsing
     app.add_middleware(SecurityHeaders)  # outermost: the limits' answers get the headers too
     for module in (session, queue, items, adjudication, admin, media):
         app.include_router(module.router)

@@ -6,7 +6,8 @@ Invariants: events are only ever inserted, in the same transaction as the change
 describe (so a rolled-back change leaves no event); on SQLite, triggers abort any UPDATE
 or DELETE of an event. Event kinds: enqueued, revision, leased, review, review_changed,
 status, claimed, adjudicated, user_added, reviews_read (an adjudicator or admin
-opened an item's reviews), user_deactivated, user_reactivated.
+opened an item's reviews), user_deactivated, user_reactivated, login_failed (a token that
+names nobody; the actor is `@<client address>`, the token is never stored).
 """
 
 from __future__ import annotations

@@ -10,13 +10,16 @@ Invariants:
 - a write authenticated by the session cookie must carry the session's CSRF token in
   `X-CSRF-Token`; a write with `Authorization: Bearer <token>` needs none (browsers never
   attach that header on their own, so it cannot be forged cross-site);
-- the session cookie is HttpOnly and SameSite=Strict.
+- the session cookie is HttpOnly and SameSite=Strict;
+- a token that names nobody is logged (`login_failed`) and costs its client a token of its
+  `throttle.FailureThrottle` bucket (checked by `deps`, before any credential is looked at).
 """
 
 from __future__ import annotations
 
 import hashlib
 import hmac
+import logging
 import secrets
 from dataclasses import dataclass
 
@@ -33,6 +36,7 @@ COOKIE = "rv_session"
 CSRF_HEADER = "x-csrf-token"
 SESSION_SECONDS = 12 * 3600
 SAFE_METHODS = {"GET", "HEAD", "OPTIONS"}
+log = logging.getLogger(__name__)
 
 
 class Unauthorized(ReviewError):
@@ -114,6 +118,16 @@ def sign_in(engine: Engine, token: str) -> tuple[User, str, str]:
         s.execute(delete(WebSession).where(WebSession.expires_at <= t))
         s.add(WebSession(id_hash=hash_token(sid), user_id=user.id, csrf=csrf, expires_at=t + SESSION_SECONDS))
         return user, sid, csrf
+
+
+LOGIN_FAILED = "login_failed"  # audit event: a token that names nobody (or a disabled person)
+
+
+def record_failure(engine: Engine, client: str, how: str) -> None:
+    """Log a failed sign-in (never the token tried): an audit event whose actor is the client."""
+    log.warning("failed sign-in (%s) from %s", how, client)
+    with write_session(engine) as s:
+        audit.record(s, f"@{client}"[:64], LOGIN_FAILED, detail=how)
 
 
 def sign_out(engine: Engine, sid: str) -> None:

@@ -27,7 +27,11 @@ def _cfg(path: Path):
     try:
         return load_config(path)
     except ConfigError as e:
-        Console(stderr=True).print(f"[red]config error[/red] {e}")
+        from rich.markup import escape
+
+        from pipeline.review.terminal import safe
+
+        Console(stderr=True).print(f"[red]config error[/red] {escape(safe(e))}")
         raise typer.Exit(2) from None
 
 
@@ -85,11 +89,13 @@ def reviewers_list(config: Path = CONFIG) -> None:
     from pipeline.review.auth import list_users
     from pipeline.review.server import engine_for
 
+    from pipeline.review.terminal import cell
+
     table = Table(title="reviewers")
     for col in ("name", "role", "active"):
         table.add_column(col)
     for u in list_users(engine_for(_cfg(config))):
-        table.add_row(u["name"], u["role"], "yes" if u["active"] else "[red]no[/red]")
+        table.add_row(cell(u["name"]), cell(u["role"]), "yes" if u["active"] else "[red]no[/red]")
     Console(width=120).print(table)
 
 
@@ -190,13 +196,15 @@ def history(item: str = typer.Argument(..., help="item id or episode key <suite>
     if not events:
         typer.echo(f"no events for {item}", err=True)
         raise typer.Exit(1)
-    table = Table(title=f"history of {item}")
+    from pipeline.review.terminal import cell
+
+    table = Table(title=cell(f"history of {item}"))
     for col in ("at", "actor", "kind", "item", "before", "after", "model / prompt", "detail"):
         table.add_column(col, overflow="fold")
     for e in events:
         model = " / ".join(x for x in (e["model"], e["prompt_name"]) if x)
-        table.add_row(e["at"], e["actor"], e["kind"], str(e["item_id"]), _short(e["before"]), _short(e["after"]),
-                      model, e["detail"])
+        table.add_row(*(cell(v) for v in (e["at"], e["actor"], e["kind"], e["item_id"], _short(e["before"]),
+                                          _short(e["after"]), model, e["detail"])))
     Console(width=200).print(table)
 
 

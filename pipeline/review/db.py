@@ -108,6 +108,7 @@ class Lease(Base):
     item_id: Mapped[int] = mapped_column(ForeignKey("items.id"), index=True)
     user_id: Mapped[int] = mapped_column(ForeignKey("users.id"))
     expires_at: Mapped[float] = mapped_column(Float, index=True)
+    taken_at: Mapped[float] = mapped_column(Float, default=now)  # renewals end at taken_at + lease_max_s
 
 
 class Review(Base):

@@ -25,7 +25,9 @@ from sqlalchemy.orm import Session
 
 from pipeline.review import auth
 from pipeline.review.db import User, read_session, writer
+from pipeline.review.errors import TooManyRequests
 from pipeline.review.media import VideoAllowlist
+from pipeline.review.throttle import FailureThrottle
 from pipeline.review.workflow import QueueSettings
 
 
@@ -35,6 +37,7 @@ class ServerContext:
     engine: Engine
     settings: QueueSettings
     videos: VideoAllowlist = field(default_factory=VideoAllowlist)
+    throttle: FailureThrottle = field(default_factory=FailureThrottle)
 
 
 async def get_ctx(request: Request) -> ServerContext:  # no I/O: no threadpool hop
@@ -44,11 +47,32 @@ async def get_ctx(request: Request) -> ServerContext:  # no I/O: no threadpool h
 CtxDep = Annotated[ServerContext, Depends(get_ctx)]
 
 
+def client_of(request: Request) -> str:
+    return request.client.host if request.client else "unknown"
+
+
+def check_throttle(ctx: ServerContext, client: str) -> None:
+    """429 while `client` has failed to sign in too often (before any credential is checked)."""
+    wait = ctx.throttle.retry_after(client)
+    if wait:
+        raise TooManyRequests(f"too many failed sign-ins from {client}; retry in {wait} s", wait)
+
+
 def current_principal(request: Request, ctx: CtxDep) -> auth.Principal:
     header = request.headers.get("authorization", "")
     bearer = header[7:].strip() if header.lower().startswith("bearer ") else None
-    return auth.authenticate(ctx.engine, request.method, bearer, request.cookies.get(auth.COOKIE),
-                             request.headers.get(auth.CSRF_HEADER))
+    cookie = request.cookies.get(auth.COOKIE)
+    client = client_of(request)
+    if bearer or cookie:
+        check_throttle(ctx, client)
+    try:
+        return auth.authenticate(ctx.engine, request.method, bearer, cookie, request.headers.get(auth.CSRF_HEADER))
+    except auth.Unauthorized:
+        if bearer or cookie:  # a guess costs; no credentials at all ("sign in first") does not
+            ctx.throttle.failed(client)
+        if bearer:  # an expired session cookie is routine, a wrong token is not
+            auth.record_failure(ctx.engine, client, "bearer token")
+        raise
 
 
 PrincipalDep = Annotated[auth.Principal, Depends(current_principal)]

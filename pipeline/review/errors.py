@@ -16,6 +16,9 @@ class ReviewError(Exception):
         self.field = field
         self.current = current
 
+    def headers(self) -> dict | None:
+        return None
+
     def body(self) -> dict:
         out: dict = {"detail": self.message}
         if self.field is not None:
@@ -41,3 +44,16 @@ class Stale(ReviewError):
 
 class Invalid(ReviewError):
     status = 422
+
+
+class TooManyRequests(ReviewError):
+    """Too many failed sign-ins from this client: retry after `retry_after` seconds."""
+
+    status = 429
+
+    def __init__(self, message: str, retry_after: int):
+        super().__init__(message)
+        self.retry_after = retry_after
+
+    def headers(self) -> dict:
+        return {"Retry-After": str(self.retry_after)}

@@ -4,7 +4,7 @@ Inputs: a read session, the time tolerance tau.
 Outputs: `summary()` (JSON-ready dict), `plot()` (PNG: level and category confusion
 matrices per characterizer model/prompt, and failure-time errors per localizer).
 Invariants: flags carry no values and are left out of agreement; superseded revisions
-are left out; model-vs-final uses final, non-excluded items only, grouped by the
+and items still collecting reviews (`blindness.closed`) are left out; model-vs-final uses final, non-excluded items only, grouped by the
 model and prompt version that produced the proposal.
 """
 
@@ -16,7 +16,7 @@ from pathlib import Path
 from sqlalchemy import select
 from sqlalchemy.orm import Session
 
-from pipeline.review import stats
+from pipeline.review import blindness, stats
 from pipeline.review.db import Item, Review
 from pipeline.review.fields import CATEGORIES, LEVELS, same_action
 from pipeline.vocab import ItemStatus
@@ -91,7 +91,8 @@ def summary(s: Session, tau: float) -> dict:
     units: dict[int, list[dict]] = defaultdict(list)
     rows = s.execute(
         select(Review.item_id, Review.values).join(Item, Item.id == Review.item_id)
-        .where(Item.status != ItemStatus.superseded, Review.values.is_not(None)).order_by(Review.id)
+        .where(Item.status != ItemStatus.superseded, blindness.closed(), Review.values.is_not(None))
+        .order_by(Review.id)
     ).all()
     for item_id, values in rows:
         if values:

@@ -28,7 +28,8 @@ def db_url(cfg: Config) -> str:
 def settings(cfg: Config) -> QueueSettings:
     s = cfg.stage3
     return QueueSettings(required_reviews=s.reviews_per_item, time_tolerance_s=s.time_tolerance_s,
-                         lease_seconds=s.lease_seconds, control_hz=cfg.stage1.rollout.control_hz)
+                         lease_seconds=s.lease_seconds, control_hz=cfg.stage1.rollout.control_hz,
+                         max_leases=s.max_leases_per_person, lease_max_s=max(s.lease_max_seconds, s.lease_seconds))
 
 
 def engine_for(cfg: Config) -> Engine:
@@ -59,13 +60,17 @@ def serve(config_path: Path, cfg: Config, host: str, port: int, workers: int = 1
     whichever process takes them."""
     import uvicorn
 
+    from pipeline.review.limits import BoundedHttpProtocol
+
+    # the header deadline and size cap live in the protocol (limits.py); the rest in the app
+    bounded = {"http": BoundedHttpProtocol}
     if workers <= 1:
-        uvicorn.run(build_app(cfg, docs=docs), host=host, port=port, log_level="info")
+        uvicorn.run(build_app(cfg, docs=docs), host=host, port=port, log_level="info", **bounded)
         return
     engine_for(cfg).dispose()  # migrate the schema once, before the workers start
     os.environ[CONFIG_ENV], os.environ[DOCS_ENV] = str(Path(config_path).resolve()), "1" if docs else "0"
     uvicorn.run("pipeline.review.server:app_from_env", factory=True, host=host, port=port, workers=workers,
-                log_level="warning", access_log=False)
+                log_level="warning", access_log=False, **bounded)
 
 
 def free_port() -> int:
@@ -80,10 +85,14 @@ class ThreadedServer:
     def __init__(self, app, port: int | None = None, host: str = "127.0.0.1"):
         import uvicorn
 
+        from pipeline.review.limits import Limits, protocol_for
+
         self.port = port or free_port()
         self.url = f"http://{host}:{self.port}"
+        limits = getattr(getattr(app, "state", None), "limits", None) or Limits()
         self.server = uvicorn.Server(uvicorn.Config(app, host=host, port=self.port, log_level="warning",
-                                                    access_log=False, limit_concurrency=512))
+                                                    access_log=False, limit_concurrency=512,
+                                                    http=protocol_for(limits)))
         self.thread = threading.Thread(target=self.server.run, daemon=True)
 
     def __enter__(self) -> ThreadedServer:

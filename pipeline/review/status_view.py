@@ -1,7 +1,8 @@
 """Printing `recover review status`: queue counts, agreement, model quality, and model and
 reviewers vs the generator's truth when there is one (rich tables).
 
-Inputs: the dict from `report.summary` plus `counts`. Output: text on the console.
+Inputs: the dict from `report.summary` plus `counts`. Output: text on the console; every
+cell goes through `terminal.cell` (model and prompt names come from model output and config).
 """
 
 from __future__ import annotations
@@ -9,6 +10,7 @@ from __future__ import annotations
 from rich.console import Console
 from rich.table import Table
 
+from pipeline.review.terminal import cell
 from pipeline.vocab import ItemStatus
 
 
@@ -24,7 +26,7 @@ def render(out: dict, console: Console | None = None) -> None:
     t.add_column("items", justify="right")
     for status in ItemStatus:
         if counts["by_status"].get(status):
-            t.add_row(status, str(counts["by_status"][status]))
+            t.add_row(cell(status), str(counts["by_status"][status]))
     console.print(t)
 
     ag = out["agreement"]
@@ -45,9 +47,9 @@ def render(out: dict, console: Console | None = None) -> None:
     for col in ("proposal by", "n", "level acc.", "category acc.", "time MAE s", "time within τ"):
         t.add_column(col)
     for g in mq["by_characterizer"]:
-        t.add_row(g["version"], str(g["n"]), _f(g["level"]["accuracy"]), _f(g["category"]["accuracy"]), "", "")
+        t.add_row(cell(g["version"]), str(g["n"]), _f(g["level"]["accuracy"]), _f(g["category"]["accuracy"]), "", "")
     for g in mq["by_localizer"]:
-        t.add_row(g["version"] + " (times)", str(g["n"]), "", "", _f(g["mean_abs_error_s"]), _f(g["within_tau"]))
+        t.add_row(cell(g["version"] + " (times)"), str(g["n"]), "", "", _f(g["mean_abs_error_s"]), _f(g["within_tau"]))
     console.print(t)
 
     truth = out.get("model_vs_truth")

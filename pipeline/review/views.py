@@ -15,6 +15,7 @@ from collections import OrderedDict
 from sqlalchemy import func, select
 from sqlalchemy.orm import Session, defer
 
+from pipeline.review import blindness
 from pipeline.review.audit import iso
 from pipeline.review.db import Item, Lease, Review, User, now
 from pipeline.review.fields import CATEGORIES, FIELDS, LEVELS, agreement, grid_time, snap_step
@@ -156,7 +157,7 @@ def queue(s: Session, user: User, can_adjudicate: bool, limit: int = 200) -> dic
     mine = select(Review.item_id).where(Review.reviewer_id == user.id)
     leases = select(func.count(Lease.id)).where(Lease.item_id == Item.id, Lease.expires_at > t).scalar_subquery()
     open_q = (select(Item).where(Item.status.in_(COLLECTING), Item.n_reviews + leases < Item.required_reviews,
-                                 Item.id.not_in(mine), Item.id.not_in([i.id for i in held])))
+                                 Item.id.not_in(mine), Item.id.not_in([i.id for i in held]), ~blindness.has_read(user)))
     n_open = s.scalar(select(func.count()).select_from(open_q.subquery())) or 0
     available = s.scalars(open_q.options(*_LIST_ONLY).order_by(Item.quarantined, Item.n_reviews.desc(), Item.id).limit(limit)).all()
     done = s.execute(
@@ -192,7 +193,7 @@ def _open_to(user: User, t: float):
     mine = select(Review.item_id).where(Review.reviewer_id == user.id)
     leases = select(func.count(Lease.id)).where(Lease.item_id == Item.id, Lease.expires_at > t).scalar_subquery()
     held = select(Lease.item_id).where(Lease.user_id == user.id, Lease.expires_at > t)
-    return Item.status.in_(COLLECTING) & Item.id.not_in(mine) & (
+    return Item.status.in_(COLLECTING) & Item.id.not_in(mine) & ~blindness.has_read(user) & (
         (Item.n_reviews + leases < Item.required_reviews) | Item.id.in_(held))
 
 
@@ -248,7 +249,7 @@ def progress(s: Session, user: User, tolerance_s: float, control_hz: int = 20) -
                                                               Review.created_at >= today)) or 0
     left = s.scalar(select(func.count(Item.id)).where(_open_to(user, t))) or 0
     closed = s.execute(select(Item.id, Item.created_at).join(Review, Review.item_id == Item.id).where(
-        Review.reviewer_id == user.id, Item.status.not_in(COLLECTING), Item.n_reviews >= Item.required_reviews)).all()
+        Review.reviewer_id == user.id, blindness.closed(), Item.n_reviews >= Item.required_reviews)).all()
     # a closed item's reviews never change: its pair counts are computed once per process
     # (keyed by the database and the item's creation time too), so this costs what the
     # items closed since the last call cost, not the reviewer's whole day

@@ -5,7 +5,9 @@ Inputs: a write session, the acting user, the item, the decision body.
 Invariants:
 - never more than K reviews: the review count rises by a conditional UPDATE
   (`n_reviews < required_reviews`), and the (item, reviewer) unique constraint backs it;
-- leases are advisory and expire; an expired lease holds nothing;
+- leases are advisory and expire; an expired lease holds nothing; a person holds at most
+  `max_leases` items at once, and renewing a lease never extends it past `lease_max_s` after
+  it was taken (an expired one is taken afresh, subject to room like anyone's);
 - a decision carries the version of the reviewer's own review it replaces (0 = none):
   anything else is stale (409); the same decision again (same idempotency key, or the
   same content after normalization, e.g. `fail_time_s: "5"` when it is 5) is answered
@@ -24,9 +26,9 @@ from sqlalchemy import and_, delete, exists, func, select, update
 from sqlalchemy.engine import Engine
 from sqlalchemy.orm import Session
 
-from pipeline.review import audit
-from pipeline.review.db import Event, Item, Lease, Review, User, now
-from pipeline.review.errors import Forbidden, Invalid, NotFound, Stale
+from pipeline.review import audit, blindness
+from pipeline.review.db import Item, Lease, Review, User, now
+from pipeline.review.errors import Invalid, NotFound, Stale
 from pipeline.review.fields import FieldError, agreement, edited_fields, resolve
 from pipeline.vocab import COLLECTING, Decision, ItemStatus, Resolution
 
@@ -39,6 +41,8 @@ class QueueSettings:
     time_tolerance_s: float = 0.5
     lease_seconds: int = 900
     control_hz: int = 20
+    max_leases: int = 3  # items one person may hold at once (the page works on one)
+    lease_max_s: int = 3600  # a lease is never renewed past this long after it was taken
 
 
 def get_item(s: Session, item_id: int, lock: bool = False) -> Item:
@@ -92,44 +96,6 @@ def _reviewed_by(user_id: int):
     return exists().where(and_(Review.item_id == Item.id, Review.reviewer_id == user_id))
 
 
-READ_REVIEWS = "reviews_read"  # audit event: this user has seen the reviews of this episode
-
-
-def _read_reviews_of(user: User):
-    """True for items whose episode's reviews `user` has read (adjudication view, history)."""
-    return exists().where(and_(Event.kind == READ_REVIEWS, Event.actor == user.name, Event.item_key == Item.key))
-
-
-def note_reviews_read(s: Session, user: User, item: Item) -> None:
-    """Record, once per episode, that `user` has read its reviews: they may no longer review it."""
-    seen = s.scalar(select(Event.id).where(Event.kind == READ_REVIEWS, Event.actor == user.name,
-                                           Event.item_key == item.key).limit(1))
-    if seen is None:
-        audit.record(s, user.name, READ_REVIEWS, item)
-
-
-def open_reviews(s: Session, user: User, item_id: int, whole_episode: bool = False, admin: bool = False) -> Item:
-    """The item whose reviews `user` is about to read (adjudication view, history), after the
-    blindness rules: nobody reads an item's reviews while they are being collected (with
-    `whole_episode`, while any revision of its episode is), nobody but an admin reading a
-    whole episode reads the others' decisions on an item they reviewed, and whoever reads
-    them is recorded so that they can no longer review that episode."""
-    item = get_item(s, item_id)
-    if item.status in COLLECTING or (whole_episode and s.scalar(
-            select(Item.id).where(Item.key == item.key, Item.status.in_(COLLECTING)).limit(1))):
-        raise Forbidden(f"item {item_id}: reviews are still being collected; they stay hidden until then")
-    if not (admin and whole_episode):
-        if s.scalar(select(Review.id).where(Review.item_id == item_id, Review.reviewer_id == user.id)):
-            raise Forbidden(f"you reviewed item {item_id}; its other decisions stay hidden from you")
-    note_reviews_read(s, user, item)
-    return item
-
-
-def _refuse_if_read(s: Session, user: User, item: Item) -> None:
-    if s.scalar(select(Item.id).where(Item.id == item.id, _read_reviews_of(user))):
-        raise Stale(f"you have read the reviews of item {item.id}'s episode; it needs reviewers who have not")
-
-
 def lease_item(s: Session, user: User, item: Item, cfg: QueueSettings) -> Lease:
     """Hold `item` for `user` for the lease time (renewing a lease they hold)."""
     t = now()
@@ -137,15 +103,20 @@ def lease_item(s: Session, user: User, item: Item, cfg: QueueSettings) -> Lease:
         raise Stale(f"item {item.id} is {item.status}, not open for review", current={"status": item.status})
     if s.scalar(select(Review.id).where(Review.item_id == item.id, Review.reviewer_id == user.id)):
         raise Stale(f"you already reviewed item {item.id}")
-    _refuse_if_read(s, user, item)
+    blindness.refuse_write(s, user, item)
     lease = s.scalar(select(Lease).where(Lease.item_id == item.id, Lease.user_id == user.id))
-    if lease is None:
+    if lease is None or lease.expires_at <= t:
         if item.n_reviews + _active_leases(s, item.id, t, exclude_user=user.id) >= item.required_reviews:
             raise Stale(f"item {item.id} already has {item.required_reviews} reviewers")
-        lease = Lease(item_id=item.id, user_id=user.id, expires_at=t + cfg.lease_seconds)
-        s.add(lease)
+        held = s.scalar(select(func.count(Lease.id)).where(Lease.user_id == user.id, Lease.expires_at > t)) or 0
+        if held >= cfg.max_leases:
+            raise Stale(f"you already hold {held} items (at most {cfg.max_leases}); decide one of them first")
+        if lease is None:
+            lease = Lease(item_id=item.id, user_id=user.id)
+            s.add(lease)
+        lease.taken_at = t
         audit.record(s, user.name, "leased", item)
-    lease.expires_at = t + cfg.lease_seconds
+    lease.expires_at = min(t + cfg.lease_seconds, lease.taken_at + cfg.lease_max_s)
     s.flush()
     refresh_status(s, item, t)
     return lease
@@ -181,7 +152,7 @@ def lease_next(s: Session, user: User, cfg: QueueSettings, tries: int = 8) -> It
     mine = s.scalars(select(Lease.item_id).where(Lease.user_id == user.id, Lease.expires_at > t)).all()
     held = s.scalar(
         select(Item).where(Item.id.in_(mine), Item.status.in_(COLLECTING), ~_reviewed_by(user.id),
-                           ~_read_reviews_of(user))
+                           ~blindness.has_read(user))
         .order_by(Item.id).limit(1).with_for_update(of=Item)
     ) if mine else None
     if held is not None:
@@ -201,7 +172,7 @@ def lease_next(s: Session, user: User, cfg: QueueSettings, tries: int = 8) -> It
             open_to_user = (
                 select(Item)
                 .where(Item.id.in_(ids), Item.status.in_(COLLECTING), Item.n_reviews + leases < Item.required_reviews,
-                       ~_reviewed_by(user.id), ~_read_reviews_of(user), Item.id.not_in(passed))
+                       ~_reviewed_by(user.id), ~blindness.has_read(user), Item.id.not_in(passed))
                 .order_by(*order).limit(1)
             )
             item = s.scalar(open_to_user.with_for_update(skip_locked=True, of=Item))
@@ -282,9 +253,9 @@ def submit_review(s: Session, user: User, item_id: int, body: dict, cfg: QueueSe
                     current={"version": current})
     if item.status not in COLLECTING:
         raise Stale(f"item {item.id} is {item.status}; it no longer takes reviews", current={"status": item.status})
+    blindness.refuse_write(s, user, item)  # a first decision or a change to one
     before = _review_dict(mine) if mine is not None else None
     if mine is None:
-        _refuse_if_read(s, user, item)
         t = now()
         held = s.scalar(select(Lease.id).where(Lease.item_id == item.id, Lease.user_id == user.id, Lease.expires_at > t))
         if held is None and item.n_reviews + _active_leases(s, item.id, t, exclude_user=user.id) >= item.required_reviews:

@@ -3,8 +3,11 @@
 The executor builds one per worker (a spawned local process, a Ray worker process, or the
 caller for the inline executor) and hands it to every unit that worker runs, so the
 current task's environment, the built policies and long-lived helpers (stage 1's render
-process) are built once per worker, not once per unit. `close()` releases them (EGL
-contexts, sockets, child processes); the executor calls it when the worker stops.
+process, stage 3's review-database engine and characterizer, a VLM client) are built once
+per worker, not once per unit: a stage holds only the factories (`helper(name, build)`),
+so the stage object stays picklable and each worker builds its own. `close()` releases
+them (EGL contexts, sockets, child processes, database connections); the executor calls
+it when the worker stops.
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ class WorkerContext:
         self._envs = None  # EnvCache, built on first use (imports the simulator)
         self._policies: dict[str, Any] = {}
         self._helpers: dict[str, Any] = {}
+        self._closers: dict[str, Callable[[Any], None]] = {}
 
     def env(self, task):
         """The environment of `task` (a TaskSpec): the worker keeps the last task's one."""
@@ -44,14 +48,22 @@ class WorkerContext:
             self._policies[key] = build()
         return self._policies[key]
 
-    def helper(self, name: str, build: Callable[[], Any], alive: Callable[[Any], bool] = lambda h: True):
-        """A long-lived helper object (with `close()`), rebuilt when `alive` says it died."""
+    def helper(self, name: str, build: Callable[[], Any], alive: Callable[[Any], bool] = lambda h: True,
+               close: Callable[[Any], None] | None = None):
+        """A long-lived helper object built by `build()` on first use, rebuilt when `alive`
+        says it died; `close(h)` releases it (default `h.close()`; an engine's is `dispose`)."""
         h = self._helpers.get(name)
         if h is None or not alive(h):
             if h is not None:
-                h.close()
+                self._close(name, h)
             h = self._helpers[name] = build()
+            if close is not None:
+                self._closers[name] = close
         return h
+
+    def _close(self, name: str, h: Any) -> None:
+        closer = self._closers.pop(name, None)
+        closer(h) if closer is not None else h.close()
 
     def peek(self, name: str):
         """The helper `name` if built, else None (never builds one)."""
@@ -64,8 +76,7 @@ class WorkerContext:
 
     def close(self) -> None:
         while self._helpers:
-            _, h = self._helpers.popitem()
-            h.close()
+            self._close(*self._helpers.popitem())
         self._close_policies()
         if self._envs is not None:
             self._envs.close()

@@ -17,6 +17,7 @@ from __future__ import annotations
 import time
 from collections import Counter
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 from pydantic import BaseModel, ConfigDict
@@ -48,6 +49,27 @@ def finished(stage: Stage, units: list) -> dict[str, dict]:
     (how a stage reads back its results: certificates, demo summaries)."""
     marks = Completions(stage.root)
     return {stage.unit_id(u): marks.info(stage.marker_id(u)) or {} for u in units if is_current(marks, stage, u)}
+
+
+def recorded_inputs(stage: Stage, units: list) -> dict[str, Any]:
+    """The inputs each done unit of `units` was computed from, by unit id (None: its marker
+    predates fingerprints); how a stage refuses to resume over outputs made another way."""
+    marks = Completions(stage.root)
+    return {stage.unit_id(u): (marks.info(stage.marker_id(u)) or {}).get("inputs")
+            for u in units if marks.is_done(stage.marker_id(u))}
+
+
+def marker_files(root, ids: list[str] | None = None) -> dict[str, Path]:
+    """The marker file of each done unit under the stage folder `root` (of `ids`, or all), by
+    unit id in sorted order: for a stage whose marker is its record (stage 1's EpisodeRecord)."""
+    marks = Completions(root)
+    done = marks.done_ids()
+    return {u: marks.dir / f"{u}.done" for u in sorted(done if ids is None else set(ids) & done)}
+
+
+def any_done(root) -> bool:
+    """Whether the stage folder `root` holds any done marker (a run to resume, not a fresh one)."""
+    return bool(Completions(root).done_ids())
 
 
 def run_shard(job: tuple, ctx: WorkerContext) -> int:

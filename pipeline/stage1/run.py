@@ -22,12 +22,12 @@ from pathlib import Path
 import yaml
 from rich.console import Console
 
-from pipeline.atomic import Completions
 from pipeline.config import Config, save_resolved
 from pipeline.errors import ConfigError
 from pipeline.executors import Executor, make_executor
 from pipeline.layout import RESOLVED_CONFIG, RunLayout
 from pipeline.runner import Runner
+from pipeline.runner.runner import any_done
 from pipeline.stage1.stage import Stage1
 from pipeline.stage1.summary import collect_records, summarize, summary_table, write_manifest, write_summary
 
@@ -48,7 +48,7 @@ def _experiment(cfg: Config) -> dict:
 
 def _check_resumable(cfg: Config, stage1: Path) -> None:
     saved = stage1 / RESOLVED_CONFIG
-    if not saved.exists() or not Completions(stage1).done_ids():
+    if not saved.exists() or not any_done(stage1):
         return
     old = Config.model_validate(yaml.safe_load(saved.read_text()))
     if _experiment(old) != _experiment(cfg):

@@ -16,7 +16,7 @@ from pathlib import Path
 import pyarrow.parquet as pq
 from rich.table import Table
 
-from pipeline.atomic import Completions, write_json, write_with
+from pipeline.atomic import write_json, write_with
 from pipeline.errors import InputError, invalid_file
 from pipeline.layout import Stage1Layout
 from pipeline.records import EpisodeRecord, episodes_table
@@ -31,14 +31,15 @@ def _record(marker: Path) -> EpisodeRecord:
 
 def collect_records(stage1_dir: Path, unit_ids: list[str] | None = None) -> list[EpisodeRecord]:
     """EpisodeRecords of the done units (of `unit_ids`, or all), sorted by key."""
-    done = Completions(stage1_dir)
-    ids = sorted(done.done_ids() if unit_ids is None else set(unit_ids) & done.done_ids())
-    records = [_record(done.dir / f"{u}.done") for u in ids]
+    from pipeline.runner.runner import marker_files
+
+    files = marker_files(stage1_dir, unit_ids)
+    records = [_record(f) for f in files.values()]
     records.sort(key=lambda r: r.key)
     keys = [r.key for r in records]
     if len(set(keys)) != len(keys):
         twice = sorted({k for k in keys if keys.count(k) > 1})
-        raise InputError(done.dir, "key", f"episode keys {twice[:5]} appear in more than one done marker")
+        raise InputError(next(iter(files.values())).parent, "key", f"episode keys {twice[:5]} appear in more than one done marker")
     return records
 
 

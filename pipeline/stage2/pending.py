@@ -62,6 +62,6 @@ def _set_aside_manifest_rows(paths: Stage2Layout, problems: list[ManifestProblem
 
 
 def forget(paths: Stage2Layout, rec: EpisodeRecord) -> None:
-    """Drop what an episode's old inputs produced that the redo would not overwrite."""
-    paths.abs(paths.vlm(rec)).unlink(missing_ok=True)  # the VLM is asked again about the new video
+    """Drop what an episode's old inputs produced that the redo would not overwrite (its VLM
+    answer is the VLM step's: its marker records the same inputs, `VLMStep.forget`)."""
     shutil.rmtree(paths.scene_dir(rec.key), ignore_errors=True)

@@ -11,6 +11,7 @@ Output layout, under `<run.output_dir>/stage2/`:
     localizations/<suite>/<task>/<episode_id>.json     one Localization per localized episode
     quarantine/<suite>/<task>/<episode_id>.json        one QuarantineEntry (reason, raw text)
     vlm/<suite>/<task>/<episode_id>.json               the VLM's stored answer (VLM backends only)
+    vlm/_done/<suite>__<task>__<episode_id>.done       the VLM step's markers (the runner's)
     selected_bddl_scenes_<suite>/<task>/episode_<episode_id>/
         step_<NNNN>.bddl                               the task's BDDL, one declaration line per type
         step_<NNNN>_sim_state.npy                      flattened MuJoCo state, first settled step >= onset
@@ -22,8 +23,8 @@ Output layout, under `<run.output_dir>/stage2/`:
     _done/<suite>__<task>__<episode_id>.done           completion markers, written last; they record
                                                        the inputs' fingerprint (see stage.py)
 
-Flow: (1) with a VLM backend, ask it about every pending episode (vlm_step, main process,
-`max_in_flight` concurrent requests); (2) the executor runs one shard per task (the env is
+Flow: (1) with a VLM backend, ask it about every pending episode (vlm_step's `VLMStep`, a
+Stage on the Runner: one shard, `max_in_flight` concurrent requests); (2) the executor runs one shard per task (the env is
 built once per task): evidence -> simstate -> onset -> phases -> scene -> history -> record;
 (3) compile the reports. The episodes run as a Stage (stage.py) through the Runner. Resumable: episodes with a done marker are skipped unless their
 inputs changed since (the marker records size + mtime of the stage-1 files and a hash of the
@@ -37,7 +38,6 @@ manifest as a whole is fatal.
 from __future__ import annotations
 
 from rich.console import Console
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 from pipeline.config import Config, save_resolved
@@ -63,10 +63,7 @@ def run(cfg: Config) -> dict:
     if todo and cfg.stage2.vlm.backend != "simstate":
         from pipeline.stage2.vlm_step import run_vlm
 
-        with Progress(TextColumn("VLM localization"), BarColumn(), MofNCompleteColumn(), TimeElapsedColumn(),
-                      console=console) as prog:
-            bar = prog.add_task("vlm", total=len(todo))
-            run_vlm(cfg, todo, paths, on_result=lambda: prog.advance(bar))
+        run_vlm(cfg, todo, console)
     if todo:
         runner.execute(stage, todo)
     summary = write_reports(paths.root)

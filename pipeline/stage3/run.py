@@ -20,8 +20,9 @@ QuarantineEntry naming file, field and reason and queued as a quarantined item, 
 an episode whose proposal or review context the queue refuses (`bad_proposal`); the summary
 counts them (`set_aside`) and prints "N set aside". The exit status stays 0: set-aside
 episodes are per-episode outcomes (pipeline.errors.EpisodeError), visible in the summary.
-The episodes run as a Stage (`Stage3`) through the Runner, in this process (inline
-executor): the runner checks and writes the done markers.
+The episodes run as a Stage (`Stage3`) through the Runner on the configured executor
+(`inline`, `local`, `ray`): the runner checks and writes the done markers; each worker
+opens its own queue engine and builds its own characterizer.
 """
 
 from __future__ import annotations
@@ -29,14 +30,13 @@ from __future__ import annotations
 from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 from rich.console import Console
 
 from pipeline.atomic import write_json
 from pipeline.config import Config, save_resolved
 from pipeline.errors import FatalError
-from pipeline.executors.local import InlineExecutor
+from pipeline.executors import make_executor
 from pipeline.layout import RunLayout, parse_key
 from pipeline.records import Characterization, QuarantineEntry, QuarantineReason
 from pipeline.rendered import require_current_frames, run_frame_tables
@@ -77,13 +77,15 @@ def proposal_for(unit: Unit, ch: Characterization | None, q: QuarantineEntry | N
 
 @dataclass
 class Stage3(Stage[Unit]):
-    """Stage 3 as a Stage, run in this process (no simulator; one queue engine): one shard of
-    every pending episode, characterized in batches of BATCH, each enqueued then finished."""
+    """Stage 3 as a Stage: one unit per episode, characterized in batches of BATCH, each
+    enqueued then finished. The stage holds only the config: each worker builds its own
+    review-database engine and characterizer (`WorkerContext.helper`), so the stage pickles
+    and runs on every executor. Concurrent workers write one SQLite file safely (WAL, busy
+    timeout, IMMEDIATE transactions: `review.db.make_engine`); enqueueing is idempotent."""
 
     cfg: Config
-    engine: Any
-    characterize: Any  # the Characterizer (pipeline.labelers), None with nothing to characterize
     name: str = "stage 3"
+    batch_size: int = BATCH  # episodes per characterizer call, and per shard with simstate
 
     def __post_init__(self):
         self.sig = _signature(self.cfg)
@@ -102,28 +104,52 @@ class Stage3(Stage[Unit]):
         return fingerprint(Path(self.cfg.out), unit)
 
     def shards(self, units: list[Unit], workers: int) -> list[tuple[Unit, ...]]:
-        return [tuple(units)] if units else []
+        if self.cfg.stage3.vlm.backend != "simstate":  # one client: `max_in_flight` bounds the server's load
+            return [tuple(units)] if units else []
+        n = self.batch_size
+        return [tuple(units[i:i + n]) for i in range(0, len(units), n)]
+
+    def engine(self, ctx: WorkerContext):
+        """This worker's review-database engine (the main process migrated the schema first)."""
+        return ctx.helper(f"stage3 engine {self.root}", lambda: engine_for(self.cfg), close=lambda e: e.dispose())
+
+    def characterizer(self, ctx: WorkerContext):
+        return ctx.helper(f"stage3 characterizer {self.root} {self.sig}",
+                          lambda: make_characterizer(self.cfg.stage3.vlm, Path(self.cfg.out)))
 
     def process(self, unit: Unit, ctx: WorkerContext) -> UnitResult:
-        raise NotImplementedError("stage 3 characterizes in batches: see stream")
+        [(_, result)] = self.batch([unit], ctx)
+        return result
 
     def stream(self, units: list[Unit], ctx: WorkerContext, finish) -> None:
+        for start in range(0, len(units), self.batch_size):
+            batch = units[start:start + self.batch_size]
+            for unit in batch:
+                ctx.emit(self.event("started", unit))
+            for unit, result in self.batch(batch, ctx):
+                finish(unit, result)
+
+    def batch(self, units: list[Unit], ctx: WorkerContext) -> list[tuple[Unit, UnitResult]]:
+        """Characterize `units` in one call, store and enqueue each; results in order."""
         run_dir, cfg = Path(self.cfg.out), self.cfg
         hz, fps = cfg.stage1.rollout.control_hz, float(cfg.stage1.video.fps)
-        for start in range(0, len(units), BATCH):
-            batch = units[start:start + BATCH]
-            inputs = [self.fingerprint(u) for u in batch]  # before reading the files
-            locs = [u.localization for u in batch if u.localization is not None]
-            got = self.characterize.characterize(locs) if locs else []
-            if len(got) != len(locs):  # a lost outcome would shift every later one onto the wrong episode
-                raise FatalError(f"stage 3: characterizer {self.characterize.name} gave {len(got)} outcomes "
-                                 f"for {len(locs)} localizations")
-            outcomes = iter(got)
-            for unit, fp in zip(batch, inputs, strict=True):
-                outcome = next(outcomes) if unit.localization is not None else unit.quarantine
-                status = _store(run_dir, cfg, self.engine, unit, outcome, hz, fps)
-                finish(unit, UnitResult(info={"key": unit.key, "characterizer": _describe(cfg)}, status=status,
-                                        ok=status == "characterized", inputs=fp))
+        inputs = [self.fingerprint(u) for u in units]  # before reading the files
+        locs = [u.localization for u in units if u.localization is not None]
+        characterize = self.characterizer(ctx) if locs else None
+        got = characterize.characterize(locs) if characterize is not None else []
+        if len(got) != len(locs):  # a lost outcome would shift every later one onto the wrong episode
+            raise FatalError(f"stage 3: characterizer {characterize.name} gave {len(got)} outcomes "
+                             f"for {len(locs)} localizations")
+        outcomes = iter(got)
+        out = []
+        for unit, fp in zip(units, inputs, strict=True):
+            outcome = next(outcomes) if unit.localization is not None else unit.quarantine
+            status = _store(run_dir, cfg, self.engine(ctx), unit, outcome, hz, fps)
+            info = {"key": unit.key, "characterizer": _describe(cfg)}
+            if status == "set_aside_bad_proposal":  # the main process counts it from the marker
+                info["quarantine"] = unit.quarantine.model_dump(mode="json")
+            out.append((unit, UnitResult(info=info, status=status, ok=status == "characterized", inputs=fp)))
+        return out
 
 
 def run(cfg: Config) -> dict:
@@ -131,8 +157,9 @@ def run(cfg: Config) -> dict:
     run_dir, s3 = layout.root, layout.stage3.root
     save_resolved(cfg, s3)
     console = Console()
-    runner = Runner(InlineExecutor(), console=console)
-    stage = Stage3(cfg, engine_for(cfg), None)
+    runner = Runner(make_executor(cfg.executor), console=console)
+    engine_for(cfg).dispose()  # create and migrate the queue here, once, before the workers open it
+    stage = Stage3(cfg)
     units = stage.units(cfg)
     todo = runner.pending(stage, units)
     if todo:  # its items show the videos to reviewers (and a VLM characterizer watches them)
@@ -140,15 +167,9 @@ def run(cfg: Config) -> dict:
     counts: Counter = Counter(skipped=len(units) - len(todo))
     if not units:
         console.print(f"[yellow]stage 3: nothing to do[/yellow]: no stage-2 outputs under {layout.stage2.root}")
-    stage.characterize = make_characterizer(cfg.stage3.vlm, run_dir) if any(u.localization for u in todo) else None
-    stage.name = f"stage 3: characterize + enqueue ({stage.characterize.name if stage.characterize else '-'})"
-    try:
-        counts.update(runner.execute(stage, todo).statuses)
-    finally:
-        if stage.characterize is not None:
-            stage.characterize.close()
-    faults = [u.quarantine for u in units if u.quarantine and u.quarantine.stage == "stage3"
-              and u.quarantine.reason in (*INPUT_FAULTS, QuarantineReason.bad_proposal)]
+    stage.name = f"stage 3: characterize + enqueue ({cfg.stage3.vlm.backend})"
+    counts.update(runner.execute(stage, todo).statuses)
+    faults = _faults(stage, units)
     summary = {"episodes": len(units), **counts, "set_aside": len(faults),
                "input_faults": [{"key": q.key, "reason": q.reason, "file": q.file, "field": q.field} for q in faults]}
     write_json(layout.stage3.summary, summary)
@@ -159,6 +180,21 @@ def run(cfg: Config) -> dict:
         for q in faults[:20]:
             console.print(f"  {q.key}: {q.reason} {q.file} field {q.field}")
     return summary
+
+
+def _faults(stage: Stage3, units: list[Unit]) -> list[QuarantineEntry]:
+    """The set-aside units, in order: the input faults `collect` found, and the proposals the
+    queue refused (recorded in their done markers by whichever worker ran them)."""
+    from pipeline.runner.runner import finished
+
+    done = finished(stage, units)
+    out = []
+    for u in units:
+        if u.quarantine and u.quarantine.stage == "stage3" and u.quarantine.reason in INPUT_FAULTS:
+            out.append(u.quarantine)
+        elif refused := done.get(u.unit_id, {}).get("quarantine"):
+            out.append(QuarantineEntry.model_validate(refused))
+    return out
 
 
 def _describe(cfg: Config) -> str:

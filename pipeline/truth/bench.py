@@ -7,19 +7,16 @@ the evidence is computed from the logged states on the simulator, nothing is wri
 stage2/); for `openai` / `transformers` the episode's agentview video and frame table.
 Failed episodes without a usable truth are set aside with their reason and counted.
 
-Localizers:
-Every localizer and characterizer is the one stages 2 and 3 use, built by
-`pipeline.labelers.registry` and called through the `Localizer` / `Characterizer` protocols:
-- simstate: the simstate localizer on the evidence for the onset, then the simstate
-  characterizer for level and category (current rules and thresholds).
-- openai | transformers: `stage2.vlm` with the chosen backend; one model is asked to localize,
-  then to characterize at its own onset; answers go through the project's parser. An
-  unusable answer is a miss, with its quarantine reason.
+Localizers: `simstate`, or `openai` | `transformers` (`stage2.vlm` with the chosen backend):
+the ones stages 2 and 3 use, run on each scored episode as a Stage on the configured
+executor (`pipeline.truth.predict`: `BenchStage`, whose done markers keep each episode's
+prediction, so a rerun with the same inputs, config and labeler code asks nothing again).
 
 Output, under `<run>/bench/localize_<localizer>/` (or `--out`), written atomically:
     report.json        every figure below, the per-episode rows and the set-aside reasons
     report.md          the same as tables, for the README and notes
     confusion_level.png, confusion_category.png   (when matplotlib is installed)
+    _done/<suite>__<task>__<episode_id>.done     each episode's prediction (the runner's marker)
 Figures: onset mean absolute error (s), share within +-0.5 s and +-1 s (of all scored
 truths: an episode the localizer found nothing in is a miss), onset before / at / after
 the truth, level and category accuracy (of those with a prediction), confusion matrices
@@ -29,31 +26,22 @@ their episode keys.
 
 from __future__ import annotations
 
-import json
-from collections import Counter, defaultdict
-from dataclasses import dataclass
+from collections import Counter
 from pathlib import Path
+
+from rich.console import Console
 
 from pipeline.atomic import write_json, write_text, write_with
 from pipeline.config import Config
 from pipeline.errors import FatalError
-from pipeline.labelers.base import Characterizer, Episode
-from pipeline.labelers.registry import make_characterizer, make_localizer
-from pipeline.layout import REPORT, RunLayout, Stage1Layout
-from pipeline.records import Category, Characterization, EpisodeRecord, Level, Localization, Phases, read_episodes
+from pipeline.layout import REPORT, RunLayout
+from pipeline.records import Category, EpisodeRecord, Level, read_episodes
+from pipeline.runner import Event
 from pipeline.truth.derive import EpisodeTruth, TruthError, episode_truth
+from pipeline.truth.predict import BenchStage, Prediction
 
 LOCALIZERS = ("simstate", "openai", "transformers")
 WORST = 10
-
-
-@dataclass
-class Prediction:
-    key: str
-    fail_step: int | None = None
-    level: str | None = None
-    category: str | None = None
-    reason: str = ""  # why a value is missing (no_failure_found, a quarantine reason, ...)
 
 
 def load_truths(run_dir: Path) -> tuple[list[EpisodeRecord], dict[str, EpisodeTruth], dict[str, str]]:
@@ -70,115 +58,6 @@ def load_truths(run_dir: Path) -> tuple[list[EpisodeRecord], dict[str, EpisodeTr
         except TruthError as e:
             aside[rec.key] = f"{e.reason}: {e}"
     return failed, truths, aside
-
-
-# ---- localizers --------------------------------------------------------------------------
-def _episode(stage1: Path, rec: EpisodeRecord, evidence=None) -> Episode:
-    """What a localizer sees of `rec`: its agentview video and frame table (a missing video is
-    the localizer's `no_video`), and the evidence when the caller measured it."""
-    import pyarrow.parquet as pq
-
-    layout = Stage1Layout(stage1)
-    folder, video = layout.episode(rec).dir, layout.video(rec, "agentview")
-    if evidence is not None or video is None or not video.is_file():
-        return Episode(rec, folder, evidence=evidence)
-    fp = layout.episode(rec).frames
-    return Episode(rec, folder, video, pq.read_table(fp) if fp.is_file() else None)
-
-
-def _stub_localization(rec: EpisodeRecord, step: int, time_s: float, source: str, phases: Phases | None = None,
-                       events=()) -> Localization:
-    """A Localization at the localizer's own onset (no scene is written: only the characterizer reads it)."""
-    phases = phases or Phases(pre=(0, step), during=(step, min(step + 1, rec.steps + 1)),
-                              post=(min(step + 1, rec.steps + 1), rec.steps + 1))
-    return Localization(key=rec.key, suite=rec.suite, task=rec.task, episode_id=rec.episode_id,
-                        instruction=rec.instruction, source=source, fail_step=step, fail_time_s=time_s,
-                        phases=phases, scene_bddl="", scene_state="", events=list(events))
-
-
-def _characterize(characterizer: Characterizer, out: dict[str, Prediction], locs: list[Localization]) -> None:
-    for loc, got in zip(locs, characterizer.characterize(locs), strict=True):
-        if isinstance(got, Characterization):
-            out[loc.key].level, out[loc.key].category = got.recovery_level.value, got.failure_category.value
-        else:
-            out[loc.key].reason = f"characterize: {got.reason}"
-
-
-def predict_simstate(cfg: Config, records: list[EpisodeRecord]) -> dict[str, Prediction]:
-    from pipeline.evidence import compute_evidence, read_evidence
-    from pipeline.stage2.layout import load_episode
-    from pipeline.stage2.phases import split_phases
-
-    layout = RunLayout.of(cfg)
-    run_dir, paths = layout.root, layout.stage2
-    vlm_cfg = cfg.stage2.vlm.model_copy(update={"backend": "simstate"})
-    localizer = make_localizer(vlm_cfg)
-    evidence: dict[str, object] = {}
-    characterizer = make_characterizer(vlm_cfg, run_dir, evidence_for=lambda loc: evidence[loc.key])
-    out: dict[str, Prediction] = {}
-    by_task: dict[tuple[str, str], list[EpisodeRecord]] = defaultdict(list)
-    for rec in records:
-        by_task[(rec.suite, rec.task)].append(rec)
-    for (suite, task), recs in sorted(by_task.items()):
-        env = None
-        for rec in recs:
-            stored = paths.abs(paths.evidence(rec))
-            try:
-                if stored.is_file():
-                    ev = read_evidence(stored)
-                else:  # no stage 2 yet: measure the logged states (nothing is written)
-                    if env is None:
-                        from pipeline.sim import build_env, get_task
-
-                        env = build_env(get_task(suite, task))
-                    ep = load_episode(layout.stage1.root, rec)
-                    ev = compute_evidence(env, ep.states, ep.steps["action"][:, 6], rec.control_hz)
-            except Exception as e:  # noqa: BLE001 - one bad episode is a miss, the rest go on
-                out[rec.key] = Prediction(rec.key, reason=f"evidence: {type(e).__name__}: {e}")
-                continue
-            [onset] = localizer.localize([_episode(layout.stage1.root, rec, ev)])
-            if onset.fail_step is None:
-                out[rec.key] = Prediction(rec.key, reason=onset.reason or "no_failure_found")
-                continue
-            step = min(onset.fail_step, len(ev) - 1)
-            loc = _stub_localization(rec, step, step / rec.control_hz, localizer.name,
-                                     split_phases(ev, step, cfg.stage2.settle_speed_mps, cfg.stage2.settle_steps),
-                                     onset.events)
-            out[rec.key] = Prediction(rec.key, step)
-            evidence[rec.key] = ev
-            _characterize(characterizer, out, [loc])
-            del evidence[rec.key]
-        if env is not None:
-            env.close()
-    return out
-
-
-def predict_vlm(cfg: Config, backend_name: str, records: list[EpisodeRecord]) -> dict[str, Prediction]:
-    from pipeline.stage2.phases import step_for_time
-
-    stage1 = RunLayout.of(cfg).stage1.root
-    out: dict[str, Prediction] = {}
-    episodes = [_episode(stage1, rec) for rec in records]
-    if not any(e.video is not None for e in episodes):
-        return {e.record.key: Prediction(e.record.key, reason="no_video") for e in episodes}
-    vlm_cfg = cfg.stage2.vlm.model_copy(update={"backend": backend_name})
-    localizer = make_localizer(vlm_cfg)
-    try:  # one model answers both questions
-        characterizer = make_characterizer(vlm_cfg, Path(cfg.out), backend=localizer.backend)
-        located = []
-        for ep, onset in zip(episodes, localizer.localize(episodes), strict=True):
-            rec = ep.record
-            if not onset.found:
-                out[rec.key] = Prediction(rec.key, reason=onset.reason or "backend_error")
-                continue
-            step = step_for_time(onset.fail_time_s, ep.frames, rec.steps, rec.control_hz)
-            out[rec.key] = Prediction(rec.key, step)
-            located.append(_stub_localization(rec, step, onset.fail_time_s, localizer.name))
-        if located:
-            _characterize(characterizer, out, located)
-    finally:
-        localizer.close()
-    return out
 
 
 # ---- scoring -----------------------------------------------------------------------------
@@ -291,22 +170,37 @@ def plot_confusion(path: Path, title: str, m: dict[str, dict[str, int]]) -> bool
     return True
 
 
+def predict(cfg: Config, localizer: str, records: list[EpisodeRecord], folder: Path,
+            console: Console | None = None) -> dict[str, Prediction]:
+    """Every episode's Prediction, by key, after running the missing ones on the configured
+    executor; an episode set aside is a miss whose reason says why."""
+    from pipeline.executors import make_executor
+    from pipeline.runner import Runner
+
+    stage = BenchStage(cfg, localizer, records, folder)
+    aside: dict[str, Event] = {}
+    Runner(make_executor(cfg.executor), console=console).run(
+        stage, cfg, on_event=lambda ev: aside.__setitem__(ev.unit, ev) if ev.kind == "set_aside" else None)
+    preds = stage.predictions()
+    for rec in records:
+        if (ev := aside.get(stage.unit_id(rec))) is not None and rec.key not in preds:
+            preds[rec.key] = Prediction(rec.key, reason=f"set aside: {ev.reason}: {ev.detail}")
+    return preds
+
+
 def run(cfg: Config, localizer: str = "simstate", out: Path | None = None) -> dict:
     if localizer not in LOCALIZERS:
         raise FatalError(f"--localizer {localizer!r}: choose one of {LOCALIZERS}")
     run_dir = Path(cfg.out)
     failed, truths, aside = load_truths(run_dir)
     scored = [r for r in failed if r.key in truths]
-    if localizer == "simstate":
-        preds = predict_simstate(cfg, scored)
-    else:
-        preds = predict_vlm(cfg, localizer, scored)
+    folder = out or RunLayout(run_dir).bench(localizer)
+    preds = predict(cfg, localizer, scored, folder)
     hz = failed[0].control_hz if failed else 20
     report = {"localizer": localizer, "run": str(run_dir), "control_hz": hz, "failed": len(failed),
               "set_aside": len(aside), "set_aside_reasons": dict(Counter(v.split(":")[0] for v in aside.values())),
               **score(truths, preds, hz), "set_aside_episodes": aside,
               "truth": {k: t.model_dump(mode="json") for k, t in truths.items()}}
-    folder = out or RunLayout(run_dir).bench(localizer)
     write_json(folder / "report.json", report)
     write_text(folder / REPORT, markdown(report, localizer, run_dir))
     report["plots"] = [str(folder / f"confusion_{k}.png") for k in ("level", "category")

@@ -52,6 +52,7 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pyarrow as pa
 import pyarrow.parquet as pq
 
 from pipeline.evidence import goal_roles
@@ -91,7 +92,7 @@ def read_truth(path: str | Path) -> tuple[list[dict], dict]:
         raise TruthError("no_truth", f"{path}: no such file (only the scripted generator writes one)")
     try:
         table = pq.read_table(path)
-    except Exception as e:  # noqa: BLE001 - any unreadable file is one bad input
+    except (pa.ArrowException, OSError) as e:  # truncated or not parquet (ArrowInvalid, ArrowIOError): one bad input
         raise TruthError("bad_truth", f"{path}: not a parquet file ({type(e).__name__}: {e})") from None
     missing = [c for c in _REQUIRED if c not in table.column_names]
     if missing:

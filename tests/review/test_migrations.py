@@ -19,6 +19,7 @@ from pipeline.review.db import Base, User, make_engine, write_session
 
 FIXTURE = Path(__file__).parent / "data" / "review_b67844a.sqlite"
 TABLES = ("users", "items", "reviews", "leases", "adjudications", "events")
+HEAD = "0003"
 
 
 def _rows(db: Path) -> dict[str, list[tuple]]:
@@ -41,8 +42,12 @@ def test_a_database_of_the_base_commit_is_upgraded_in_place_with_everything_inta
     assert [len(before[t]) for t in TABLES] == [4, 6, 7, 1, 1, 23]  # what the fixture holds
     engine = make_engine(f"sqlite:///{db}")  # what `recover review serve` and `stage3` do
     try:
-        assert migrations.current(engine) == "0002"
-        assert _rows(db) == before  # every user, item, review, lease, adjudication and audit event
+        assert migrations.current(engine) == HEAD
+        after = _rows(db)
+        # 0003 adds `taken_at` to leases: an old lease counts as taken when it was due to expire
+        assert [r[4] for r in after["leases"]] == [r[3] for r in before["leases"]]
+        after["leases"] = [r[:4] for r in after["leases"]]
+        assert after == before  # every user, item, review, lease, adjudication and audit event
         assert _schema_drift(engine) == []
         # the upgraded queue works: bob's review closes the item ann reviewed and bob holds
         item_id = next(r[0] for r in before["items"] if r[7] == "reviewed")
@@ -54,7 +59,7 @@ def test_a_database_of_the_base_commit_is_upgraded_in_place_with_everything_inta
     finally:
         engine.dispose()
     engine = make_engine(f"sqlite:///{db}")  # opening it again changes nothing
-    assert migrations.current(engine) == "0002"
+    assert migrations.current(engine) == HEAD
     engine.dispose()
     con = sqlite3.connect(db)
     assert con.execute("SELECT name FROM sqlite_master WHERE name = 'ix_items_open_queue'").fetchall() == []
@@ -62,7 +67,7 @@ def test_a_database_of_the_base_commit_is_upgraded_in_place_with_everything_inta
 
 
 def test_the_migrations_build_the_schema_the_models_describe_with_an_append_only_audit_log(engine, items):
-    assert migrations.current(engine) == "0002"
+    assert migrations.current(engine) == HEAD
     assert _schema_drift(engine) == []
     for stmt in ("UPDATE events SET detail = 'rewritten'", "DELETE FROM events"):
         with pytest.raises(DBAPIError, match="append-only"):

@@ -45,7 +45,7 @@ def test_a_revision_that_changes_nothing_is_not_stored(server, people, items, en
     ann = client(server, people, "ann")
     first = revise(ann, items[0], "a", fail_time_s=2.5)
     assert first.status_code == 200 and first.json()["version"] == 1
-    again = revise(ann, items[0], "b", version=1, fail_time_s="2.5")  # the same time, sent as text
+    again = revise(ann, items[0], "b", version=1, fail_time_s=2.51)  # the same control step (a text "2.5" is a 422)
     assert again.status_code == 200 and again.json()["replayed"] is True and again.json()["version"] == 1
     with read_session(engine) as s:
         assert s.scalar(select(Review.version).where(Review.item_id == items[0])) == 1
@@ -58,7 +58,7 @@ def test_sending_the_accepted_models_time_again_as_a_revision_changes_nothing(se
     model_t = ann.get(f"/api/items/{items[0]}").json()["proposal"]["fail_time_s"]
     assert ann.post(f"/api/items/{items[0]}/review", json={"decision": "accept", "version": 0,
                                                            "idempotency_key": "a"}).json()["version"] == 1
-    again = revise(ann, items[0], "b", version=1, fail_time_s=str(model_t))  # "1.5" when it is 1.5
+    again = revise(ann, items[0], "b", version=1, fail_time_s=model_t + 0.01)  # 1.51 when it is 1.5: the same step
     assert again.status_code == 200 and again.json()["replayed"] is True and again.json()["decision"] == "accept"
     with read_session(engine) as s:
         review = s.scalar(select(Review).where(Review.item_id == items[0]))

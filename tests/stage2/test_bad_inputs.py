@@ -107,24 +107,24 @@ def test_a_manifest_that_cannot_be_read_at_all_is_fatal_and_named(tmp_path):
 @pytest.mark.xdist_group("stage2_rollouts")
 def test_a_stored_vlm_answer_that_does_not_read_sets_only_its_episode_aside_naming_the_file(stage1_run, episodes,
                                                                                             tmp_path):
-    from pipeline.labelers.base import Onset
     from pipeline.layout import RunLayout
+    from pipeline.stage2.vlm_step import run_vlm
+    from tests.labelers.vlm.loopback_server import LoopbackServer
 
     run_dir = tmp_path / "run"
     shutil.copytree(stage1_run, run_dir)
     paths = RunLayout(run_dir).stage2
     failed = [r for r in episodes.values() if not r.success]
     good, bad = episodes["drop"], episodes["miss"]
-    for rec in failed:  # every answer stored: the VLM step asks no server
-        paths.abs(paths.vlm(rec)).parent.mkdir(parents=True, exist_ok=True)
-        answer = Onset(source="openai", model="m", prompt_name="localize.v1.zh", prompt_hash="ab", raw_text="x",
-                       latency_s=0.1, fail_time_s=5.5)
-        paths.abs(paths.vlm(rec)).write_text(json.dumps(answer.stored()))
+    with LoopbackServer(answer='{"fail": 5.5}') as srv:  # every answer stored (and marked): the run asks no server
+        cfg = Config.model_validate({"run": {"output_dir": str(run_dir)}, "executor": {"workers": 1},
+                                     "stage2": {"history_frames": 0, "vlm": {
+                                         "backend": "openai", "language": "en",
+                                         "openai": {"base_url": srv.base_url, "model": "ok", "max_retries": 0}}}})
+        assert run_vlm(cfg, failed) == len(failed)
     paths.abs(paths.vlm(bad)).write_text('{"source": "openai", "fail_time_s": ')  # cut off mid-write
-    cfg = Config.model_validate({"run": {"output_dir": str(run_dir)}, "executor": {"workers": 1},
-                                 "stage2": {"history_frames": 0, "vlm": {"backend": "openai"}}})
     run(cfg)
     q = QuarantineEntry.model_validate_json(paths.abs(paths.quarantine(bad)).read_text())
     assert q.reason == "episode_error" and str(paths.abs(paths.vlm(bad))) in q.detail
     loc = json.loads(paths.abs(paths.localization(good)).read_text())
-    assert (loc["source"], loc["fail_time_s"], loc["model"]) == ("openai", 5.5, "m")
+    assert (loc["source"], loc["fail_time_s"], loc["model"]) == ("openai", 5.5, "ok")

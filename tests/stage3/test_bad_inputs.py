@@ -18,6 +18,7 @@ from pipeline.review.db import Item, make_engine, read_session
 from tests.review.sample_run import SUITE, TASK, build
 
 EP = "scripted-i{:02d}-s0".format
+INLINE = {"executor": {"kind": "inline"}}  # about the inputs, not the executor (test_executors.py): no worker to spawn
 
 
 def _loc_file(run, i):
@@ -40,7 +41,7 @@ def bad_run(tmp_path):
     _edit(run, 2, fail_time_s=99.0)
     _edit(run, 4, key=f"{SUITE}/{TASK}/{EP(3)}", episode_id=EP(3))  # repeats episode 3's key
     cfg = tmp_path / "c.yaml"
-    cfg.write_text(yaml.safe_dump({"run": {"output_dir": str(run)}, "stage3": {"reviews_per_item": 2}}))
+    cfg.write_text(yaml.safe_dump({"run": {"output_dir": str(run)}, "stage3": {"reviews_per_item": 2}, **INLINE}))
     return run, cfg
 
 
@@ -143,7 +144,7 @@ def test_a_proposal_the_queue_refuses_is_set_aside_naming_file_and_field(tmp_pat
     build(run, n_episodes=2, n_quarantined=0, wrist=False)
     _edit(run, 0, fail_step=-1)  # a time the checks pass, a step no video has
     cfg = tmp_path / "c.yaml"
-    cfg.write_text(yaml.safe_dump({"run": {"output_dir": str(run)}, "stage3": {"reviews_per_item": 2}}))
+    cfg.write_text(yaml.safe_dump({"run": {"output_dir": str(run)}, "stage3": {"reviews_per_item": 2}, **INLINE}))
     _stage3(cfg)
     items = _items(run)
     assert items[EP(0)].quarantined and items[EP(0)].quarantine_reason == "stage3:bad_proposal"

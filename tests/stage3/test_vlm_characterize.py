@@ -95,5 +95,6 @@ def test_a_new_characterizer_makes_new_revisions_and_leaves_final_records_alone(
 
 def load_config_for(tmp_path, run, vlm: dict):
     path = tmp_path / f"cfg-{vlm['backend']}.yaml"
-    path.write_text(yaml.safe_dump({"run": {"output_dir": str(run)}, "stage3": {"vlm": vlm}}))
+    path.write_text(yaml.safe_dump({"run": {"output_dir": str(run)}, "stage3": {"vlm": vlm},
+                                    "executor": {"kind": "inline"}}))  # the tests above run the VLM in a worker
     return load_config(path)

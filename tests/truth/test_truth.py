@@ -88,7 +88,9 @@ def test_the_openai_backend_goes_through_bench_localize_over_loopback(truth_run,
             "backend": "openai", "language": "en",
             "openai": {"base_url": srv.base_url, "model": "ok", "max_retries": 0}}}})
         report = bench(cfg, "openai", tmp_path / "bench")
-    assert len(srv.seen) == 4  # localize, then characterize, per episode
+        assert len(srv.seen) == 4  # localize, then characterize, per episode
+        again = bench(cfg, "openai", tmp_path / "bench")  # the predictions are the episodes' done markers
+    assert len(srv.seen) == 4 and again["episodes"] == report["episodes"]
     by_key = {r["key"]: r for r in report["episodes"]}
     assert by_key[miss.key]["error_s"] == pytest.approx(2.0, abs=0.06)
     assert report["characterized"] == 2 and by_key[miss.key]["pred_category"] == "grasp_failure"
@@ -157,3 +159,28 @@ def test_the_transformers_backend_goes_through_bench_localize_with_a_tiny_qwen(t
     assert report["truths"] == 2 and report["localizer"] == "transformers"
     assert report["localized"] + sum(report["unlocalized_reasons"].values()) == 2
     assert (tmp_path / "bench" / "report.json").is_file()
+
+
+@pytest.mark.sim
+@pytest.mark.xdist_group("truth_run")
+def test_an_episode_the_localizer_cannot_run_on_is_set_aside_as_a_miss_with_the_reason(truth_run, tmp_path):
+    import pyarrow as pa
+
+    from pipeline.config import Config
+    from pipeline.truth.bench import run as bench
+
+    run, eps = truth_run
+    copy = tmp_path / "run"
+    shutil.copytree(run / "stage1", copy / "stage1")
+    manifest = copy / "stage1" / "episodes.parquet"
+    table = pq.read_table(manifest)
+    tasks = ["no_such_task" if e == eps["drop"].episode_id else t
+             for e, t in zip(table.column("episode_id").to_pylist(), table.column("task").to_pylist(), strict=True)]
+    pq.write_table(table.set_column(table.schema.get_field_index("task"), "task", pa.array(tasks)), manifest)
+    cfg = Config.model_validate({"run": {"output_dir": str(copy)}, "executor": {"kind": "inline"}})
+    report = bench(cfg, "simstate", tmp_path / "bench")
+    by_key = {r["key"]: r for r in report["episodes"]}
+    [aside] = [r for r in by_key.values() if "no_such_task" in r["key"]]
+    assert aside["pred_step"] is None and aside["reason"].startswith("set aside: KeyError") and "no_such_task" in aside["reason"]
+    assert by_key[eps["miss"].key]["pred_step"] is not None  # the other episode goes on
+    assert len(list((tmp_path / "bench" / "_done").glob("*.done"))) == 1  # no marker: tried again next time

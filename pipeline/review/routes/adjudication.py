@@ -1,5 +1,5 @@
 """Conflicts, for adjudicators: GET /api/items/{id}/adjudication, POST .../claim,
-POST .../adjudication, GET .../history (reviews are shown only by `workflow.open_reviews`)."""
+POST .../adjudication, GET .../history (reviews are shown only through `blindness.open_reviews`)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ from typing import Annotated
 from fastapi import APIRouter
 from fastapi.responses import JSONResponse
 
-from pipeline.review import adjudication, audit, auth, views, workflow
+from pipeline.review import adjudication, audit, blindness, views, workflow
 from pipeline.review.deps import AdjudicatorDep, CtxDep, ItemId, WriteDb, json_body
 from pipeline.review.schemas import AdjudicationIn
 
@@ -18,7 +18,7 @@ router = APIRouter(prefix="/api/items")
 @router.get("/{item_id}/adjudication")
 def adjudication_page(item_id: ItemId, user: AdjudicatorDep, s: WriteDb):  # writes who read the reviews
     with s.begin():
-        return JSONResponse(views.adjudication_view(s, workflow.open_reviews(s, user, item_id)))
+        return JSONResponse(views.adjudication_view(s, blindness.open_reviews(s, user, item_id)))
 
 
 @router.post("/{item_id}/claim")
@@ -41,6 +41,5 @@ def adjudicate(item_id: ItemId, user: AdjudicatorDep, body: Annotated[Adjudicati
 @router.get("/{item_id}/history")
 def history(item_id: ItemId, user: AdjudicatorDep, s: WriteDb):  # spans every revision of the episode
     with s.begin():
-        workflow.open_reviews(s, user, item_id, whole_episode=True,
-                              admin=auth.rank(user.role) >= auth.rank("admin"))
+        blindness.open_reviews(s, user, item_id, whole_episode=True)
         return {"item": item_id, "events": audit.history(s, item_id)}
