@@ -269,7 +269,9 @@ class TransformersBackendConfig(_Strict):
 class VLMConfig(_Strict):
     backend: Literal["simstate", "openai", "transformers"] = "simstate"
     language: Literal["zh", "en"] = "zh"
-    prompt_version: str = "v1"  # prompts/<task>.<version>.<language>.md
+    # prompts/<task>.<version>.<language>.md: v2 (JSON-only answers, characterization not told
+    # the onset) or v1; a missing file is a ConfigError when the backend is built
+    prompt_version: str = Field(default="v2", pattern=r"^v[0-9]+$")
     prompts_dir: Path | None = None  # default: the repository's prompts/
     sampling: SamplingConfig = SamplingConfig()
     openai: OpenAIBackendConfig = OpenAIBackendConfig()
