@@ -377,6 +377,10 @@ class EvalConfig(_Strict):
     rd_every_steps: int = Field(default=20, ge=1)
     rd_trials: int = Field(default=1, ge=1)
     epsilon: float = Field(default=1e-3, gt=0)
+    # standard LIBERO success beside RSR: per policy x task of the evaluated scenes, trials
+    # from LIBERO's official init states 0..official_trials-1 (unperturbed, gripper open,
+    # first chunk size, eval.horizon steps); 0: none
+    official_trials: int = Field(default=2, ge=0)
 
 
 class Config(_Strict):

@@ -6,6 +6,9 @@ Definitions (the reference's, with the choices the issue left open made explicit
   matching the filters (any of: policy, chunk_size, suite, level, gripper, task, ...).
   The RSR of an empty subset is undefined: NaN (reports print it as "—"), never 0, so a
   missing cell is not mistaken for a policy that always fails.
+- LIBERO success of a subset = successes / trials over the `official`-mode rows: the policy
+  from LIBERO's official init states, the benchmark's standard success rate, drawn beside
+  RSR (NaN when none).
 - R_k = the RSR of task k (its scenes' trials pooled).
 - RC (recovery consistency) = 1 - std_k(R_k), with the *population* std (ddof = 0): the
   tasks evaluated are the whole population being described, not a sample of some larger
@@ -63,6 +66,11 @@ def success_rate(rows: Iterable[MetricRow]) -> float:
     if not rows:
         return NAN
     return sum(r.success for r in rows) / len(rows)
+
+
+def libero_success(rows: Iterable[MetricRow], **where) -> float:
+    """Standard LIBERO success over the official-init-state trials matching `where`."""
+    return success_rate(select(rows, mode="official", **where))
 
 
 def rsr(rows: Iterable[MetricRow], **where) -> float:

@@ -2,8 +2,8 @@
 
 Inputs: a validated `Config` and the scenes (`scenes.find_scenes`). Outputs: `Trial`s
 (scene trials for every policy x chunk size x scene x gripper condition x trial index,
-then RD reruns for every policy x scene x start state x rerun index at the first chunk
-size); the eval Stage (stage.py) shards them by task.
+then official-init-state trials for every policy x task x `official_trials`, then RD reruns
+for every policy x scene x start state x rerun index, both at the first chunk size); the eval Stage (stage.py) shards them by task.
 
 Invariants: the plan is a pure function of the config and the scenes; unit ids are
 unique.
@@ -67,6 +67,17 @@ def plan_trials(cfg: Config, scenes: list[Scene]) -> tuple[list[Trial], list[str
                         trials.append(Trial(scene=s, policy=policy_name(p), policy_kind=p.kind, gripper=g,
                                             trial=t, chunk_size=chunk,
                                             temporal_context=context[policy_name(p)], **common))
+    # standard LIBERO success: each task's official init states, on its first scene's
+    # environment (the scene's BDDL is the task's, so its model restores them)
+    first_scene = {}
+    for s in scenes:
+        first_scene.setdefault((s.suite, s.task), s)
+    for p in e.policies:
+        for s in first_scene.values():
+            for t in range(e.official_trials):
+                trials.append(Trial(scene=s, policy=policy_name(p), policy_kind=p.kind, gripper="open", trial=t,
+                                    chunk_size=e.chunk_sizes[0], mode="official",
+                                    temporal_context=context[policy_name(p)], **common))
     problems: list[str] = []
     if e.rd:
         starts = {}

@@ -34,6 +34,7 @@ class GripperCondition(StrEnum):
 class TrialMode(StrEnum):
     scene = "scene"  # from a recovery scene: the RSR / RC population
     rd = "rd"  # from a state along the original failed rollout: the RD population
+    official = "official"  # from LIBERO's official init state `trial`: standard LIBERO success
 
 
 class RDPhase(StrEnum):

@@ -4,6 +4,8 @@ Inputs: evaluation rows (`records.MetricRow`, from `records.read_rows`), the `Ev
 Outputs in `out`: `report.md`; `metrics.json` (NaN written as null); `rsr_heatmap.png`
 (RSR per suite x level, one panel per policy); `gripper.png` (open vs closed);
 `rd_phases.png` (RD rerun success before / during / after the failure, per suite);
+`libero_vs_rsr.png` (standard LIBERO success from the official init states beside RSR, per
+policy and suite, when official trials ran);
 `chunk_sweep.png` (RSR per chunk size, when more than one was run).
 
 Tables use the first configured chunk size, except the sweep. Rates are percentages; an
@@ -30,7 +32,12 @@ def pct(x: float) -> str:
 
 
 def _cell(rows, **where) -> str:
+    """Rate (trials) of the scene trials matching `where`."""
     wins, n = M.counts(rows, **where)
+    return _rate(wins, n)
+
+
+def _rate(wins: int, n: int) -> str:
     return "—" if n == 0 else f"{pct(wins / n)} ({n})"
 
 
@@ -44,7 +51,9 @@ def _ordered(values, order) -> list:
 
 
 def _levels(rows) -> list[str | None]:
-    """L1..L4 always (the main table's columns), then any other level, then unlabeled."""
+    """L1..L4 always (the main table's columns), then any other level, then unlabeled (of
+    the scene trials: official-init-state trials have no level)."""
+    rows = M.select(rows, mode="scene")
     lv = list(LEVELS) + [v for v in _ordered({r.level for r in rows}, LEVELS) if v not in LEVELS]
     return lv + ([None] if any(r.level is None for r in rows) else [])
 
@@ -74,6 +83,8 @@ def compute(rows: list[MetricRow], ecfg: EvalConfig) -> dict:
                                 | {"all": _nan_none(M.rsr(main, suite=m))} for s, m in groups},
             "rsr_level": {lv or "unlabeled": _nan_none(M.rsr(main, level=lv)) for lv in _levels(main)},
             "rc": {s: _nan_none(M.rc(main, suite=m)) for s, m in groups} | {"all": _nan_none(M.rc(main))},
+            "libero_success": {s: _nan_none(M.libero_success(main, suite=m)) for s, m in groups}
+            | {"all": _nan_none(M.libero_success(main))},
             "task_rates": {f"{s}/{t}": _nan_none(v) for (s, t), v in M.task_rates(main).items()},
             "rd": {},
             "gripper": {g: _nan_none(M.rsr(main, gripper=g)) for g in ("open", "closed")},
@@ -108,6 +119,20 @@ def summary_table(rows: list[MetricRow], data: dict, contexts: dict[str, str] | 
                   + ["all"], body)
 
 
+def libero_table(rows: list[MetricRow], data: dict) -> str:
+    """Standard LIBERO success beside RSR, a row per policy x suite (LIBERO-100 included)."""
+    main = M.select(rows, chunk_size=data["chunk_size"])
+    body = []
+    for pol in data["policies"]:
+        sel = M.select(main, policy=pol)
+        for s, m in suite_rows(sel) + [("all", None)]:
+            where = {} if m is None else {"suite": m}
+            official = M.select(sel, mode="official", **where)
+            body.append([f"`{pol}`", "**all**" if m is None else _name(s, m),
+                         _rate(sum(r.success for r in official), len(official)), _cell(sel, **where)])
+    return _table(["policy", "suite", "LIBERO success", "RSR"], body)
+
+
 def _contexts(ecfg: EvalConfig) -> dict[str, str] | None:
     """policy name -> its temporal context, when any policy is evaluated with one."""
     from pipeline.eval.plan import context_of, policy_name
@@ -130,6 +155,11 @@ def markdown(rows: list[MetricRow], ecfg: EvalConfig, data: dict, header: str = 
                 "(not an average of the two rates).\n"] if any(m != (s,) for s, m in groups) else []),
              "\n## RSR per policy × level\n\nThe experts read privileged simulator state: they are references "
              "(what a competent recovering policy scores), not contestants.\n\n", summary_table(rows, data, _contexts(ecfg))]
+    official = M.select(rows, mode="official", chunk_size=chunk)
+    if official:
+        parts += ["\n## LIBERO success vs RSR per policy × suite\n\nLIBERO success: the policy from LIBERO's official "
+                  "init states of the evaluated tasks (unperturbed, gripper open, `eval.official_trials` per task); "
+                  "RSR: from the recovery scenes of the same tasks.\n\n", libero_table(rows, data)]
     for pol, res in data["policies"].items():
         main = M.select(rows, policy=pol, chunk_size=chunk)
         lvls = _levels(main)
@@ -201,6 +231,9 @@ def plots(data: dict, ecfg: EvalConfig, out: Path) -> list[str]:
     plt.close(fig)
     written.append("gripper.png")
 
+    if any(v is not None for p in pols for v in data["policies"][p]["libero_success"].values()):
+        written.append(_libero_plot(data, pols, out, plt, np))
+
     if any(v["scenes"] for p in pols for v in data["policies"][p]["rd"].values()):
         written.append(_rd_phase_plot(data, pols, out, plt, np))
 
@@ -224,6 +257,31 @@ def plots(data: dict, ecfg: EvalConfig, out: Path) -> list[str]:
 
 
 PHASES = ("pre", "during", "post")
+
+
+def _libero_plot(data: dict, pols: list[str], out: Path, plt, np) -> str:
+    """Standard LIBERO success (official init states) beside RSR, bars per suite, one panel
+    per policy: how much of a policy's benchmark success survives its own failures."""
+    fig, axes = plt.subplots(1, len(pols), figsize=(1.2 + 1.1 * len(data["policies"][pols[0]]["libero_success"])
+                                                     * len(pols), 3.4), squeeze=False)
+    for ax, pol in zip(axes[0], pols, strict=True):
+        res = data["policies"][pol]
+        suites = list(res["libero_success"])
+        rsr = {**{s: v["all"] for s, v in res["rsr_suite_level"].items()}, "all": res["rsr"]}
+        x = np.arange(len(suites))
+        for k, (label, vals) in enumerate((("LIBERO (official init)", res["libero_success"]), ("LIBERO-Recover RSR", rsr))):
+            ys = [np.nan if vals.get(s) is None else 100 * vals[s] for s in suites]
+            ax.bar(x + (k - 0.5) * 0.38, ys, 0.38, label=label)
+        ax.set_xticks(x, suites, rotation=30, ha="right", fontsize=8)
+        ax.set_ylim(0, 125)  # headroom: the legend sits above the bars
+        ax.set_yticks(range(0, 101, 20))
+        ax.set_ylabel("success %")
+        ax.set_title(f"LIBERO vs RSR — {pol}")
+        ax.legend(fontsize=7, ncol=2, loc="upper center")
+    fig.tight_layout()
+    write_with(out / "libero_vs_rsr.png", lambda p: fig.savefig(p, dpi=120))
+    plt.close(fig)
+    return "libero_vs_rsr.png"
 
 
 def _rd_phase_plot(data: dict, pols: list[str], out: Path, plt, np) -> str:
