@@ -8,11 +8,13 @@ Output folder (default `<run>/release/`):
                                                     step_<NNNN>_history[...]   pre-failure history
     scenarios.parquet        the manifest (`pipeline.release.manifest`), certificate and split included
     split.json               the train/eval split's seed, share and counts (`pipeline.release.split`)
-    README.md, figures/      the dataset card (`pipeline.release.card`)
+    README.md, figures/      the dataset card (`pipeline.release.card`) and the object positions
+                             against the official init states (`pipeline.release.positions`)
     SHA256SUMS               every released file above (`sha256sum -c SHA256SUMS` works)
     _build/                  NOT part of the set: build time, quarantined annotations, certificates
                              (`_build/certificates/_done/`, see `pipeline.release.certify`),
-                             `recover verify`'s results (`_build/verify/_done/`)
+                             `recover verify`'s results (`_build/verify/_done/`), object positions
+                             per task model (`_build/positions/_done/`)
 Invariants: released bytes depend only on the inputs and the config (no timestamps, no
 absolute paths, sorted rows), so the same config and seed rebuild them byte for byte; scene
 files are copied unchanged; files of scenes no longer released are removed.
@@ -31,6 +33,9 @@ from pipeline.config import Config
 from pipeline.errors import FatalError
 from pipeline.layout import RESOLVED_CONFIG, RELEASE_BUILD, RELEASE_CARD, RELEASE_SPLIT, RELEASE_SUMS, SCENE_PREFIX, STATE_SUFFIX, ReleaseLayout, RunLayout
 from pipeline.release.card import FIGURE, render_card, write_figure
+from pipeline.release.positions import FIGURE as POSITIONS_FIGURE
+from pipeline.release.positions import collect
+from pipeline.release.positions import write_figure as write_positions_figure
 from pipeline.release.certify import certify_all, scene_refs
 from pipeline.release.manifest import MANIFEST_NAME, ScenarioRow, sha256_file, write_manifest
 from pipeline.records import QuarantineEntry, QuarantineReason
@@ -159,10 +164,16 @@ def build(cfg: Config, console: Console | None = None, executor: Executor | None
                                                  "certify_successes": c.successes,
                                                  "certify_reason": c.reason})
 
+    positions = collect(refs, cfg, out / BUILD_DIR / "positions", executor=executor, console=console)
+    for p in positions:
+        if p["note"]:
+            console.print(f"[yellow]object positions[/yellow] {p['note']}", highlight=False)
+
     rows, split = apply_split(rows, cfg.release.split)
     write_manifest(out / MANIFEST_NAME, rows)
     write_json(ReleaseLayout(out).split, split.model_dump(mode="json"))
     write_figure(rows, out / FIGURE)
+    write_positions_figure(positions, out / POSITIONS_FIGURE)
     hashes = {
         "localization": sorted({r.localize_prompt_hash for r in rows if r.localize_prompt_hash}),
         "characterization": sorted({r.characterize_prompt_hash for r in rows if r.characterize_prompt_hash}),
@@ -170,7 +181,8 @@ def build(cfg: Config, console: Console | None = None, executor: Executor | None
     people = {r.reviewer for it in items for r in it.annotation.reviews}
     write_text(ReleaseLayout(out).card, render_card(rows, cfg, hashes, len(people)))
 
-    released = sorted({p for r in rows for p, _ in r.files()} | {MANIFEST_NAME, FIGURE, RELEASE_CARD, RELEASE_SPLIT})
+    released = sorted({p for r in rows for p, _ in r.files()}
+                      | {MANIFEST_NAME, FIGURE, POSITIONS_FIGURE, RELEASE_CARD, RELEASE_SPLIT})
     removed = _remove_stale(out, set(released))
     write_text(out / SUMS_NAME, "".join(f"{sha256_file(out / p)}  {p}\n" for p in released))
 

@@ -1,7 +1,8 @@
 """The dataset card: `README.md` (tables and provenance) and a stacked-bar PNG.
 
 Inputs: the manifest rows, the resolved config, the package versions. Outputs: markdown
-text and `figures/scenes_by_suite_level.png`. Invariant: deterministic bytes for the same
+text and `figures/scenes_by_suite_level.png` (the object-positions figure beside it is
+`pipeline.release.positions`'s). Invariant: deterministic bytes for the same
 inputs (no dates, no absolute paths: output folders and database URLs are redacted from
 the config; PNG written without software/date metadata).
 """
@@ -19,6 +20,7 @@ from pipeline.atomic import write_with
 from pipeline.config import Config, reported_suites
 from pipeline.records import Category, Level
 from pipeline.release.manifest import ScenarioRow
+from pipeline.release.positions import FIGURE as POSITIONS_FIGURE
 
 FIGURE = "figures/scenes_by_suite_level.png"
 LEVELS = [lv.value for lv in Level]
@@ -182,6 +184,11 @@ their scenes: with libero_spatial, libero_object and libero_goal it makes the 16
 dimensions of the reference (4 suites x 4 levels). The total counts each scene once.
 
 ![scenes by suite and level]({FIGURE})
+
+Where the scenes put the objects, against LIBERO's official init states of the same tasks
+(x/y on the table of every movable object; grey: the official init states, red: the scenes):
+
+![object positions: scenes vs official init states]({POSITIONS_FIGURE})
 
 ## Train / eval split
 

@@ -40,7 +40,8 @@ def test_release_lays_out_scene_pairs_history_manifest_and_card(run):
     assert (out / "figures/scenes_by_suite_level.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     check = subprocess.run(["sha256sum", "-c", "--quiet", "SHA256SUMS"], cwd=out, capture_output=True, text=True)
     assert check.returncode == 0, check.stdout + check.stderr
-    assert len((out / "SHA256SUMS").read_text().splitlines()) == 2 * 3 + 4  # + split.json
+    assert len((out / "SHA256SUMS").read_text().splitlines()) == 2 * 3 + 5  # + split.json, positions figure
+    assert (out / "figures/object_positions.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     # two scenes of one suite x level: the split keeps one of them for eval, and says so
     assert "eval" in {r.split for r in rows}
     split = json.loads((out / "split.json").read_text())
@@ -121,3 +122,28 @@ def test_two_generators_merge_into_one_release_that_verifies_and_rebuilds_identi
     c = make_run(tmp_path / "c", scene_source, {"scripted-i00-s0": (good, bddl)})
     with pytest.raises(FatalError, match="in both"):
         build(release_config(a, merge_runs=[str(c)]))
+
+
+def test_object_positions_are_read_from_the_scenes_states_and_libero_init_files(run):
+    import numpy as np
+
+    from pipeline.release.certify import scene_refs
+    from pipeline.release.positions import collect
+    from pipeline.sim import get_task
+
+    cfg = release_config(run)
+    rows = build(cfg)
+    out = run / "release"
+    [res] = collect(scene_refs(rows, out), cfg, out / "_build" / "positions")  # one task model; stored, not rebuilt
+    init = get_task(rows[0].suite, rows[0].task).init_states()
+    objects = len(res["official"]) // len(init)
+    assert res["n_official"] == len(init) == 50 and res["n_scenes"] == 2 and objects >= 2
+    assert len(res["scenes"]) == 2 * objects and res["note"] is None
+
+    def at(state, xy):  # the pair sits at consecutive places of the flattened state (a free joint's x, y)
+        return any(np.allclose(state[i:i + 2], xy, atol=1e-4) for i in range(1, len(state) - 1))
+
+    state = np.load(out / rows[0].state_path)
+    assert all(at(state, xy) for xy in res["scenes"][:objects])
+    assert all(at(init[1], xy) for xy in res["official"][objects:2 * objects])
+    assert res["official"][:objects] != res["official"][objects:2 * objects]  # init states differ in layout
