@@ -26,6 +26,14 @@ CONFIG = typer.Option(Path("configs/smoke.yaml"), "--config", "-c", help="run co
 DRY = typer.Option(False, "--dry-run", help="print the resolved config and stop")
 
 
+def _print_config(cfg: Config) -> None:
+    """The resolved config as YAML, verbatim: no wrapping (a long path split over two lines
+    is no longer YAML) and no rich markup (a `[...]` in a value is text)."""
+    import yaml
+
+    typer.echo(yaml.safe_dump(cfg.model_dump(mode="json"), sort_keys=False))
+
+
 def _load(path: Path, dry_run: bool = False) -> Config:
     try:
         cfg = load_config(path)
@@ -33,9 +41,7 @@ def _load(path: Path, dry_run: bool = False) -> Config:
         err.print(f"[red]config error[/red] {e}")
         raise typer.Exit(2) from None
     if dry_run:
-        import yaml
-
-        console.print(yaml.safe_dump(cfg.model_dump(mode="json"), sort_keys=False))
+        _print_config(cfg)
         raise typer.Exit(0)
     return cfg
 
@@ -146,9 +152,20 @@ def export_lerobot(config: Path = CONFIG, out: Path = typer.Option(None, help="o
 
 
 @app.command("eval")
-def evaluate(config: Path = CONFIG, dry_run: bool = DRY) -> None:
+def evaluate(config: Path = CONFIG, dry_run: bool = DRY,
+             split: str = typer.Option(None, "--split", help="eval | train | all: which side of the release's "
+                                                             "train/eval split (default: eval.split, `eval`)")) -> None:
     """Evaluate policies on the scenario set: RSR, RD, RC."""
-    _call("pipeline.eval.run:run", _load(config, dry_run))
+    cfg = _load(config)
+    if split is not None:
+        if split not in ("eval", "train", "all"):
+            err.print(f"[red]--split[/red] must be eval, train or all, got {split!r}")
+            raise typer.Exit(2)
+        cfg = cfg.model_copy(update={"eval": cfg.eval.model_copy(update={"split": split})})
+    if dry_run:
+        _print_config(cfg)
+        raise typer.Exit(0)
+    _call("pipeline.eval.run:run", cfg)
 
 
 @app.command("bench-localize")

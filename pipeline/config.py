@@ -29,6 +29,23 @@ from pipeline.errors import ConfigError
 from pipeline.layout import RESOLVED_CONFIG
 
 SUITES = ("libero_spatial", "libero_object", "libero_goal", "libero_10", "libero_90")
+# suites reported also as one: the reference's LIBERO-100 is LIBERO-10 and LIBERO-90 together
+# (its 16 evaluation dimensions: spatial, object, goal, 100 x 4 levels)
+SUITE_UNIONS = {"libero_100": ("libero_10", "libero_90")}
+
+
+def reported_suites(present) -> list[tuple[str, tuple[str, ...]]]:
+    """(name, member suites) of every suite row a table shows: each present suite (in the
+    order given; a set is sorted), then each union with a present member, right after its last
+    member. Rates of a union are computed from its members' scenes and trials, never by
+    averaging the members' rates."""
+    present = sorted(present) if isinstance(present, (set, frozenset)) else list(dict.fromkeys(present))
+    out = [(s, (s,)) for s in present]
+    for name, members in SUITE_UNIONS.items():
+        if any(m in present for m in members):
+            last = max(i for i, (s, _) in enumerate(out) if s in members)
+            out.insert(last + 1, (name, tuple(m for m in members if m in present)))
+    return out
 
 
 def _scalar_types(annotation) -> set:
@@ -155,6 +172,10 @@ class PolicyConfig(_Strict):
     name: str | None = None  # recorded with each episode; defaults to kind
     scripted: ScriptedPolicyConfig = ScriptedPolicyConfig()
     openpi: OpenpiPolicyConfig = OpenpiPolicyConfig()
+    # eval only: this policy's temporal context, in place of eval.temporal_context, so one
+    # server is evaluated without context, with the initial frame and with the history side
+    # by side (three entries with three names: one report row each)
+    temporal_context: Literal["none", "initial_frame", "history"] | None = None
 
 
 class VideoConfig(_Strict):
@@ -248,7 +269,9 @@ class TransformersBackendConfig(_Strict):
 class VLMConfig(_Strict):
     backend: Literal["simstate", "openai", "transformers"] = "simstate"
     language: Literal["zh", "en"] = "zh"
-    prompt_version: str = "v1"  # prompts/<task>.<version>.<language>.md
+    # prompts/<task>.<version>.<language>.md: v2 (JSON-only answers, characterization not told
+    # the onset) or v1; a missing file is a ConfigError when the backend is built
+    prompt_version: str = Field(default="v2", pattern=r"^v[0-9]+$")
     prompts_dir: Path | None = None  # default: the repository's prompts/
     sampling: SamplingConfig = SamplingConfig()
     openai: OpenAIBackendConfig = OpenAIBackendConfig()
@@ -288,8 +311,22 @@ class Stage3Config(_Strict):
     workers: int = Field(default=2, ge=1, le=64)
 
 
+class SplitConfig(_Strict):
+    # share of released scenes that get recovery demonstrations (train); the rest is the
+    # evaluation set. Default 0.19: the reference recorded recoveries on 413 of 2,178 scenes.
+    train_share: float = Field(default=0.19, ge=0.0, le=1.0)
+    # a scene's side is a hash of (seed, scene id), not of the run seed: reruns with another
+    # run seed, or releases that add scenes, keep every existing scene on its side
+    seed: int = 0
+
+
 class ReleaseConfig(_Strict):
     output_dir: Path | None = None  # default: <run.output_dir>/release
+    split: SplitConfig = SplitConfig()  # train/eval split of the released scenes (release/split.py)
+    # more run folders (other generators or seeds over the same task selection) whose final
+    # reviewed scenes join this run's in one release; episode keys must stay unique
+    # (`stage1.policy.name` tells generators apart), scenes record their generator
+    merge_runs: list[Path] = Field(default_factory=list)
     certify_tries: int = Field(default=2, ge=0)  # expert tries per scene; 0 = skip
     # steps per certificate try: the horizon `recover eval` gives a policy from a scene
     # (eval.horizon, and the benchmark's own task horizon, 520), so "certified" means a
@@ -325,6 +362,10 @@ class EvalConfig(_Strict):
     horizon: int = Field(default=520, ge=1)
     chunk_sizes: list[int] = Field(default_factory=lambda: [8])
     temporal_context: Literal["none", "initial_frame", "history"] = "none"
+    # which scenes of a release with a train/eval split to evaluate: `eval` (default: the
+    # scenes no recovery demonstration was recorded on), `train`, or `all`; stage-2 scene
+    # folders carry no split and are evaluated whole
+    split: Literal["eval", "train", "all"] = "eval"
     # scenes: a released set (with scenarios.parquet) or stage-2 output; default: the run's
     # release folder if it exists, else <run>/stage2
     scenes_dir: Path | None = None
@@ -336,6 +377,10 @@ class EvalConfig(_Strict):
     rd_every_steps: int = Field(default=20, ge=1)
     rd_trials: int = Field(default=1, ge=1)
     epsilon: float = Field(default=1e-3, gt=0)
+    # standard LIBERO success beside RSR: per policy x task of the evaluated scenes, trials
+    # from LIBERO's official init states 0..official_trials-1 (unperturbed, gripper open,
+    # first chunk size, eval.horizon steps); 0: none
+    official_trials: int = Field(default=2, ge=0)
 
 
 class Config(_Strict):

@@ -109,9 +109,9 @@ def _stage3(cfg: Config) -> Stage:
 
 def _demos(cfg: Config) -> Stage:
     from pipeline.release.manifest import read_manifest
-    from pipeline.release.recovery_demos import DemoStage
+    from pipeline.release.recovery_demos import DemoStage, train_rows
 
-    return DemoStage(cfg, read_manifest(RunLayout.of(cfg).release.manifest))
+    return DemoStage(cfg, train_rows(read_manifest(RunLayout.of(cfg).release.manifest)))  # as `recover demos`
 
 
 def _hash(*parts: Any) -> str:
@@ -139,8 +139,9 @@ def _final_reviews(cfg: Config) -> str:
 
 
 def _release_inputs(cfg: Config) -> str:
-    run = RunLayout.of(cfg)
-    return _hash(run.stage3.annotations, run.stage2.localizations_dir, run.stage1.manifest,
+    runs = [RunLayout.of(cfg)] + [RunLayout(Path(r)) for r in cfg.release.merge_runs]  # merged runs too
+    return _hash(*(p for run in runs for p in (run.stage3.annotations, run.stage2.localizations_dir,
+                                              run.stage1.manifest)),
                  cfg.release.model_dump(mode="json"), cfg.stage1.rollout.model_dump(mode="json"))
 
 

@@ -32,6 +32,7 @@ MANIFEST = "episodes.parquet"  # stage 1's manifest, and eval's table of trials
 RELEASE_MANIFEST = "scenarios.parquet"
 RELEASE_CARD = "README.md"
 RELEASE_SUMS = "SHA256SUMS"
+RELEASE_SPLIT = "split.json"  # the train/eval split's parameters and counts
 RELEASE_BUILD = "_build"  # inside a release folder, outside the released set
 QUARANTINE_LOG = "quarantine.jsonl"
 REPORT = "report.md"
@@ -378,6 +379,10 @@ class ReleaseLayout:
     @property
     def sums(self) -> Path:
         return self.root / RELEASE_SUMS
+
+    @property
+    def split(self) -> Path:
+        return self.root / RELEASE_SPLIT
 
     @property
     def build_dir(self) -> Path:

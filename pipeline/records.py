@@ -67,6 +67,17 @@ class EpisodeRecord(Record):
     def key(self) -> str:
         return episode_key(self.suite, self.task, self.episode_id)
 
+    @property
+    def generator(self) -> str:
+        """Which generator produced it: `<kind>:<name>@<params hash>`; the hash (of the
+        policy's recorded parameters: noise levels, server and its metadata, checkpoint)
+        tells apart two generators of one name, e.g. the scripted expert at two noise levels."""
+        import hashlib
+        import json
+
+        params = json.dumps(self.policy_params, sort_keys=True, separators=(",", ":"), default=str)
+        return f"{self.policy_kind}:{self.policy}@{hashlib.sha256(params.encode()).hexdigest()[:8]}"
+
 
 # The stage 1 manifest (stage1/episodes.parquet): one row per EpisodeRecord, same column
 # names; `policy_params` is stored as a JSON string and `videos` as a map camera -> file.

@@ -18,6 +18,13 @@ class Level(StrEnum):
     L4 = "L4"  # environmental recovery
 
 
+class Split(StrEnum):
+    """A released scene's side of the train/eval split (`pipeline.release.split`)."""
+
+    train = "train"  # recovery demonstrations are recorded here (fine-tuning data)
+    eval = "eval"  # held out: `recover eval` scores policies here by default
+
+
 class Category(StrEnum):
     grasp_failure = "grasp_failure"
     placement_failure = "placement_failure"

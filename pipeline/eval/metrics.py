@@ -6,15 +6,20 @@ Definitions (the reference's, with the choices the issue left open made explicit
   matching the filters (any of: policy, chunk_size, suite, level, gripper, task, ...).
   The RSR of an empty subset is undefined: NaN (reports print it as "—"), never 0, so a
   missing cell is not mistaken for a policy that always fails.
+- LIBERO success of a subset = successes / trials over the `official`-mode rows: the policy
+  from LIBERO's official init states, the benchmark's standard success rate, drawn beside
+  RSR (NaN when none).
 - R_k = the RSR of task k (its scenes' trials pooled).
 - RC (recovery consistency) = 1 - std_k(R_k), with the *population* std (ddof = 0): the
   tasks evaluated are the whole population being described, not a sample of some larger
   set, and a single task then has RC = 1 rather than an undefined sample std. RC of a
   subset with no task is NaN.
-- RD (recovery degradation) = 1 - (M_post + eps) / (M_pre + eps), where M_pre / M_post are
-  the success rates of the `rd`-mode reruns started before / at-or-after the failure onset.
-  Matched subsets: only scenes (source episodes) with at least one pre *and* one post rerun
-  count, both rates pool the reruns of exactly those scenes. No such scene: NaN.
+- RD (recovery degradation) = 1 - (M_post + eps) / (M_pre + eps), where M_pre / M_during /
+  M_post are the success rates of the `rd`-mode reruns started before the failure onset,
+  while it unfolds and after it (stage 2's phases; `eval.rd`). Matched subsets: only scenes
+  (source episodes) with at least one pre *and* one post rerun count, all three rates pool
+  the reruns of exactly those scenes (M_during is NaN when they have no during rerun: a
+  phase shorter than `rd_every_steps`). No such scene: NaN.
   RD > 0: the policy does worse after the failure than before it; 0: no degradation;
   < 0: it does better (e.g. the failure happened to help). eps keeps 0/0 finite (RD = 0).
 """
@@ -63,6 +68,11 @@ def success_rate(rows: Iterable[MetricRow]) -> float:
     return sum(r.success for r in rows) / len(rows)
 
 
+def libero_success(rows: Iterable[MetricRow], **where) -> float:
+    """Standard LIBERO success over the official-init-state trials matching `where`."""
+    return success_rate(select(rows, mode="official", **where))
+
+
 def rsr(rows: Iterable[MetricRow], **where) -> float:
     """Recovery success rate over the scene trials matching `where`; NaN when none match."""
     return success_rate(select(rows, mode="scene", **where))
@@ -93,25 +103,27 @@ class RDResult:
     n_pre: int  # reruns counted
     n_post: int
     scenes: int  # matched scenes
+    m_during: float = NAN
+    n_during: int = 0
 
 
 def rd(rows: Iterable[MetricRow], epsilon: float, **where) -> RDResult:
     """Recovery degradation from the RD reruns matching `where` (matched scenes only)."""
     if epsilon <= 0:
         raise ValueError(f"epsilon must be > 0, got {epsilon}")
-    by_scene: dict[str, dict[str, list[MetricRow]]] = defaultdict(lambda: {"pre": [], "post": []})
+    by_scene: dict[str, dict[str, list[MetricRow]]] = defaultdict(lambda: {"pre": [], "during": [], "post": []})
     for r in select(rows, mode="rd", **where):
         phase = _value(r.rd_phase)
-        if phase not in ("pre", "post"):
-            raise ValueError(f"rd row of scene {r.scene_id} has rd_phase {phase!r}, need pre or post")
+        if phase not in ("pre", "during", "post"):
+            raise ValueError(f"rd row of scene {r.scene_id} has rd_phase {phase!r}, need pre, during or post")
         by_scene[r.scene_id][phase].append(r)
     matched = [v for v in by_scene.values() if v["pre"] and v["post"]]
-    pre = [r for v in matched for r in v["pre"]]
-    post = [r for v in matched for r in v["post"]]
+    pre, during, post = ([r for v in matched for r in v[ph]] for ph in ("pre", "during", "post"))
     if not matched:
         return RDResult(NAN, NAN, NAN, 0, 0, 0)
     m_pre, m_post = success_rate(pre), success_rate(post)
-    return RDResult(1.0 - (m_post + epsilon) / (m_pre + epsilon), m_pre, m_post, len(pre), len(post), len(matched))
+    return RDResult(1.0 - (m_post + epsilon) / (m_pre + epsilon), m_pre, m_post, len(pre), len(post), len(matched),
+                    success_rate(during), len(during))
 
 
 def counts(rows: Iterable[MetricRow], **where) -> tuple[int, int]:

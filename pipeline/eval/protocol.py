@@ -8,7 +8,9 @@ seeded horizontal offset (`perturb`) -> initialize the gripper open/closed with 
 arm actions and re-anchor the controller (`gripper_init`) -> roll the policy out closed
 loop (`pipeline.rollout.run_episode`) for at most `horizon` steps; success = the goal holds
 after some step before the horizon. RD mode starts from a state of the original failed
-rollout instead, unperturbed, with the gripper command that was in force there.
+rollout instead, unperturbed, with the gripper command that was in force there. Official
+mode starts from LIBERO's official init state number `trial` of the task (as LIBERO's own
+evaluation), unperturbed, gripper open: standard LIBERO success beside RSR.
 
 Invariants: a trial is a deterministic function of (seed, scene, trial, start step,
 gripper, chunk size, policy): offsets and the policy's seed derive from
@@ -46,7 +48,7 @@ class Trial:
     max_offset_m: float
     gripper_settle_steps: int
     temporal_context: str = "none"  # none | initial_frame | history
-    mode: str = "scene"  # scene | rd
+    mode: str = "scene"  # scene | rd | official
     rd_phase: str | None = None
     rd_start_step: int | None = None
     rd_folder: Path | None = None  # stage-1 episode folder holding states.npy
@@ -70,6 +72,9 @@ def source_init_state(scene: Scene) -> int | None:
     return int(m.group(1)) if m else None
 
 
+HISTORY_FRAMES = 8  # the reference's history variant: the 8 frames before the failure
+
+
 def temporal_context(env, policy, trial: Trial) -> dict:
     """What an accepting policy gets in `Observation.context` (call before restoring)."""
     if trial.temporal_context == "none" or not getattr(policy, "accepts_context", False):
@@ -82,8 +87,14 @@ def temporal_context(env, policy, trial: Trial) -> dict:
             if p.suffix == ".npz":
                 with np.load(p) as z:
                     hist.update({k: z[k] for k in z.files})
-        return {"kind": "history", "history": hist, "history_paths": [str(p) for p in trial.scene.history_paths]}
-    index = source_init_state(trial.scene)
+        ctx = {"kind": "history", "history": hist, "history_paths": [str(p) for p in trial.scene.history_paths]}
+        cams = list(getattr(policy, "cameras", ()))
+        if cams and "sim_states" in hist and len(hist["sim_states"]):
+            # image policies see the history as frames: its last HISTORY_FRAMES logged states,
+            # rendered like the current frames (the released history holds states, not pixels)
+            ctx["history_images"] = env.render_states(hist["sim_states"][-HISTORY_FRAMES:], cams, policy.image_size)
+        return ctx
+    index = official_index(env, trial) if trial.mode == "official" else source_init_state(trial.scene)
     if index is None:
         return {}
     state = env.task.init_states()[index]
@@ -92,7 +103,13 @@ def temporal_context(env, policy, trial: Trial) -> dict:
     return {"kind": "initial_frame", "initial_state": state, "initial_images": images}
 
 
-def start_state(trial: Trial) -> np.ndarray:
+def official_index(env, trial: Trial) -> int:
+    return trial.trial % len(env.task.init_states())
+
+
+def start_state(trial: Trial, env=None) -> np.ndarray:
+    if trial.mode == "official":
+        return env.task.init_states()[official_index(env, trial)]
     if trial.mode == "rd":
         from pipeline.eval.rd import load_start_state
 
@@ -107,11 +124,12 @@ def run_trial(env, policy, trial: Trial) -> EvalEpisode:
     t0 = time.perf_counter()
     scene = trial.scene
     context = temporal_context(env, policy, trial)
-    state = start_state(trial)
+    state = start_state(trial, env)
     try:
         env.reset_to(state)
     except ValueError as e:
-        raise EpisodeError("state_mismatch", f"{trial.scene.state_path if trial.mode == 'scene' else trial.rd_folder}: {e}") from None
+        where = {"scene": trial.scene.state_path, "rd": trial.rd_folder, "official": env.task.init_states_path}
+        raise EpisodeError("state_mismatch", f"{where[trial.mode]}: {e}") from None
     offsets = {}
     if trial.mode == "scene":
         offsets = perturb(env, trial.seed, scene.scene_id, trial.trial, trial.max_offset_m)
@@ -127,10 +145,13 @@ def run_trial(env, policy, trial: Trial) -> EvalEpisode:
 
     res = run_episode(env, policy, trial.horizon, trial.chunk_size, stop_on_success=True, on_step=on_step,
                       context=context)
+    official = trial.mode == "official"  # no failure, no scene: the task from its init state
     return EvalEpisode(
         mode=trial.mode, scene_id=scene.scene_id, suite=scene.suite, task=scene.task,
-        instruction=scene.instruction or env.task.instruction, episode_id=scene.episode_id,
-        scene_step=scene.step, level=scene.level, category=scene.category, policy=trial.policy,
+        instruction=scene.instruction or env.task.instruction,
+        episode_id=f"official-i{official_index(env, trial):02d}" if official else scene.episode_id,
+        scene_step=0 if official else scene.step, level=None if official else scene.level,
+        category=None if official else scene.category, policy=trial.policy,
         policy_kind=trial.policy_kind, gripper=trial.gripper, trial=trial.trial, seed=trial.seed,
         policy_seed=pseed, chunk_size=trial.chunk_size, horizon=trial.horizon,
         temporal_context=context.get("kind", "none"), offsets=offsets,

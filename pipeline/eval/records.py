@@ -34,11 +34,13 @@ class GripperCondition(StrEnum):
 class TrialMode(StrEnum):
     scene = "scene"  # from a recovery scene: the RSR / RC population
     rd = "rd"  # from a state along the original failed rollout: the RD population
+    official = "official"  # from LIBERO's official init state `trial`: standard LIBERO success
 
 
 class RDPhase(StrEnum):
     pre = "pre"  # start state before the failure onset
-    post = "post"  # start state at or after the onset
+    during = "during"  # while the failure unfolds (stage 2's during phase)
+    post = "post"  # after it (or at or after the onset when the phases are unknown)
 
 
 class EvalEpisode(Record):

@@ -3,6 +3,9 @@
 Inputs: evaluation rows (`records.MetricRow`, from `records.read_rows`), the `EvalConfig` (epsilon, chunk sizes).
 Outputs in `out`: `report.md`; `metrics.json` (NaN written as null); `rsr_heatmap.png`
 (RSR per suite x level, one panel per policy); `gripper.png` (open vs closed);
+`rd_phases.png` (RD rerun success before / during / after the failure, per suite);
+`libero_vs_rsr.png` (standard LIBERO success from the official init states beside RSR, per
+policy and suite, when official trials ran);
 `chunk_sweep.png` (RSR per chunk size, when more than one was run).
 
 Tables use the first configured chunk size, except the sweep. Rates are percentages; an
@@ -15,7 +18,7 @@ import math
 from pathlib import Path
 
 from pipeline.atomic import write_json, write_text, write_with
-from pipeline.config import SUITES, EvalConfig
+from pipeline.config import SUITES, EvalConfig, reported_suites
 from pipeline.eval import metrics as M
 from pipeline.eval.records import MetricRow
 from pipeline.layout import EvalLayout
@@ -29,7 +32,12 @@ def pct(x: float) -> str:
 
 
 def _cell(rows, **where) -> str:
+    """Rate (trials) of the scene trials matching `where`."""
     wins, n = M.counts(rows, **where)
+    return _rate(wins, n)
+
+
+def _rate(wins: int, n: int) -> str:
     return "—" if n == 0 else f"{pct(wins / n)} ({n})"
 
 
@@ -43,7 +51,9 @@ def _ordered(values, order) -> list:
 
 
 def _levels(rows) -> list[str | None]:
-    """L1..L4 always (the main table's columns), then any other level, then unlabeled."""
+    """L1..L4 always (the main table's columns), then any other level, then unlabeled (of
+    the scene trials: official-init-state trials have no level)."""
+    rows = M.select(rows, mode="scene")
     lv = list(LEVELS) + [v for v in _ordered({r.level for r in rows}, LEVELS) if v not in LEVELS]
     return lv + ([None] if any(r.level is None for r in rows) else [])
 
@@ -53,30 +63,38 @@ def _table(header: list[str], body: list[list[str]]) -> str:
     return "\n".join(lines + ["| " + " | ".join(r) + " |" for r in body]) + "\n"
 
 
+def suite_rows(rows) -> list[tuple[str, tuple[str, ...]]]:
+    """(row name, member suites): each suite, and LIBERO-100 (libero_100) beside its halves,
+    pooled from their trials (`config.reported_suites`)."""
+    return reported_suites(_ordered({r.suite for r in rows}, SUITES))
+
+
 def compute(rows: list[MetricRow], ecfg: EvalConfig) -> dict:
     """Every number of the report, as plain data (NaN -> None)."""
     chunk = ecfg.chunk_sizes[0]
     out: dict = {"chunk_size": chunk, "epsilon": ecfg.epsilon, "policies": {}}
-    suites = _ordered({r.suite for r in rows}, SUITES)
+    groups = suite_rows(rows)
     for pol in _ordered({r.policy for r in rows}, []):
         base = M.select(rows, policy=pol)
         main = M.select(base, chunk_size=chunk)
         res = {
             "rsr": _nan_none(M.rsr(main)),
-            "rsr_suite_level": {s: {lv or "unlabeled": _nan_none(M.rsr(main, suite=s, level=lv)) for lv in _levels(main)}
-                                | {"all": _nan_none(M.rsr(main, suite=s))} for s in suites},
+            "rsr_suite_level": {s: {lv or "unlabeled": _nan_none(M.rsr(main, suite=m, level=lv)) for lv in _levels(main)}
+                                | {"all": _nan_none(M.rsr(main, suite=m))} for s, m in groups},
             "rsr_level": {lv or "unlabeled": _nan_none(M.rsr(main, level=lv)) for lv in _levels(main)},
-            "rc": {s: _nan_none(M.rc(main, suite=s)) for s in suites} | {"all": _nan_none(M.rc(main))},
+            "rc": {s: _nan_none(M.rc(main, suite=m)) for s, m in groups} | {"all": _nan_none(M.rc(main))},
+            "libero_success": {s: _nan_none(M.libero_success(main, suite=m)) for s, m in groups}
+            | {"all": _nan_none(M.libero_success(main))},
             "task_rates": {f"{s}/{t}": _nan_none(v) for (s, t), v in M.task_rates(main).items()},
             "rd": {},
             "gripper": {g: _nan_none(M.rsr(main, gripper=g)) for g in ("open", "closed")},
             "chunk_sweep": {str(c): _nan_none(M.rsr(base, chunk_size=c)) for c in ecfg.chunk_sizes},
         }
-        for s in suites + [None]:
-            r = M.rd(main, ecfg.epsilon, **({} if s is None else {"suite": s}))
-            res["rd"][s or "all"] = {"rd": _nan_none(r.rd), "m_pre": _nan_none(r.m_pre),
-                                     "m_post": _nan_none(r.m_post), "n_pre": r.n_pre, "n_post": r.n_post,
-                                     "scenes": r.scenes}
+        for s, m in groups + [("all", None)]:
+            r = M.rd(main, ecfg.epsilon, **({} if m is None else {"suite": m}))
+            res["rd"][s] = {"rd": _nan_none(r.rd), "m_pre": _nan_none(r.m_pre),
+                            "m_during": _nan_none(r.m_during), "m_post": _nan_none(r.m_post),
+                            "n_pre": r.n_pre, "n_during": r.n_during, "n_post": r.n_post, "scenes": r.scenes}
         out["policies"][pol] = res
     return out
 
@@ -85,8 +103,9 @@ def compute(rows: list[MetricRow], ecfg: EvalConfig) -> dict:
 KIND_LABEL = {"scripted": "scripted expert (reference)", "recovery": "recovery expert (reference)"}
 
 
-def summary_table(rows: list[MetricRow], data: dict) -> str:
-    """RSR per policy x level, one row per policy: the experts sit beside the evaluated policies."""
+def summary_table(rows: list[MetricRow], data: dict, contexts: dict[str, str] | None = None) -> str:
+    """RSR per policy x level, one row per policy: the experts sit beside the evaluated policies,
+    and a policy evaluated with several temporal contexts (one name each) has a row per variant."""
     main = M.select(rows, mode="scene", chunk_size=data["chunk_size"])
     lvls = _levels(main)
     body = []
@@ -94,31 +113,70 @@ def summary_table(rows: list[MetricRow], data: dict) -> str:
         sel = M.select(main, policy=pol)
         kinds = sorted({r.policy_kind or "" for r in sel} - {""})
         kind = ", ".join(KIND_LABEL.get(k, k) for k in kinds) or "—"
-        body.append([f"`{pol}`", kind] + [_cell(sel, level=lv) for lv in lvls] + [_cell(sel)])
-    return _table(["policy", "kind"] + [lv or "unlabeled" for lv in lvls] + ["all"], body)
+        ctx = [(contexts or {}).get(pol, "none")] if contexts else []
+        body.append([f"`{pol}`", kind] + ctx + [_cell(sel, level=lv) for lv in lvls] + [_cell(sel)])
+    return _table(["policy", "kind"] + (["temporal context"] if contexts else []) + [lv or "unlabeled" for lv in lvls]
+                  + ["all"], body)
+
+
+def libero_table(rows: list[MetricRow], data: dict) -> str:
+    """Standard LIBERO success beside RSR, a row per policy x suite (LIBERO-100 included)."""
+    main = M.select(rows, chunk_size=data["chunk_size"])
+    body = []
+    for pol in data["policies"]:
+        sel = M.select(main, policy=pol)
+        for s, m in suite_rows(sel) + [("all", None)]:
+            where = {} if m is None else {"suite": m}
+            official = M.select(sel, mode="official", **where)
+            body.append([f"`{pol}`", "**all**" if m is None else _name(s, m),
+                         _rate(sum(r.success for r in official), len(official)), _cell(sel, **where)])
+    return _table(["policy", "suite", "LIBERO success", "RSR"], body)
+
+
+def _contexts(ecfg: EvalConfig) -> dict[str, str] | None:
+    """policy name -> its temporal context, when any policy is evaluated with one."""
+    from pipeline.eval.plan import context_of, policy_name
+
+    ctx = {policy_name(p): context_of(p, ecfg) for p in ecfg.policies}
+    return ctx if any(v != "none" for v in ctx.values()) else None
+
+
+def _name(suite: str, members: tuple[str, ...]) -> str:
+    return suite if members == (suite,) else f"*{suite}*"  # a union: LIBERO-100
 
 
 def markdown(rows: list[MetricRow], ecfg: EvalConfig, data: dict, header: str = "") -> str:
     chunk = data["chunk_size"]
-    suites = _ordered({r.suite for r in rows}, SUITES)
+    groups = suite_rows(rows)
     parts = ["# Recovery evaluation\n\n", header, "\n",
              f"Rates in %, trials in parentheses; — = no trials in that subset. Chunk size {chunk} unless noted; "
              f"RD epsilon {ecfg.epsilon:g}; RC uses the population std of task rates.\n",
+             *(["*libero_100* is LIBERO-100, libero_10 and libero_90 together: its rates pool their trials "
+                "(not an average of the two rates).\n"] if any(m != (s,) for s, m in groups) else []),
              "\n## RSR per policy × level\n\nThe experts read privileged simulator state: they are references "
-             "(what a competent recovering policy scores), not contestants.\n\n", summary_table(rows, data)]
+             "(what a competent recovering policy scores), not contestants.\n\n", summary_table(rows, data, _contexts(ecfg))]
+    official = M.select(rows, mode="official", chunk_size=chunk)
+    if official:
+        parts += ["\n## LIBERO success vs RSR per policy × suite\n\nLIBERO success: the policy from LIBERO's official "
+                  "init states of the evaluated tasks (unperturbed, gripper open, `eval.official_trials` per task); "
+                  "RSR: from the recovery scenes of the same tasks.\n\n", libero_table(rows, data)]
     for pol, res in data["policies"].items():
         main = M.select(rows, policy=pol, chunk_size=chunk)
         lvls = _levels(main)
         head = ["suite"] + [lv or "unlabeled" for lv in lvls] + ["all"]
-        body = [[s] + [_cell(main, suite=s, level=lv) for lv in lvls] + [_cell(main, suite=s)] for s in suites]
+        body = [[_name(s, m)] + [_cell(main, suite=m, level=lv) for lv in lvls] + [_cell(main, suite=m)]
+                for s, m in groups]
         body.append(["**all**"] + [_cell(main, level=lv) for lv in lvls] + [_cell(main)])
         parts += [f"\n## Policy `{pol}`\n\n### RSR per suite × level\n\n", _table(head, body)]
-        rd_body = [[k, pct(v["m_pre"]), pct(v["m_post"]), "—" if v["rd"] is None else f"{v['rd']:.3f}",
-                    f"{v['scenes']} / {v['n_pre']} / {v['n_post']}"] for k, v in res["rd"].items()]
-        parts += ["\n### RD per suite\n\n", _table(["suite", "M_pre", "M_post", "RD", "scenes / pre / post reruns"], rd_body)]
+        rd_body = [[k, pct(v["m_pre"]), pct(v["m_during"]), pct(v["m_post"]),
+                    "—" if v["rd"] is None else f"{v['rd']:.3f}",
+                    f"{v['scenes']} / {v['n_pre']} / {v['n_during']} / {v['n_post']}"] for k, v in res["rd"].items()]
+        parts += ["\n### RD per suite\n\nReruns from states along the source rollout, by stage 2's phase: before "
+                  "the failure (pre), while it unfolds (during), after it (post); RD = 1 - (M_post + ε)/(M_pre + ε).\n\n",
+                  _table(["suite", "M_pre", "M_during", "M_post", "RD", "scenes / pre / during / post reruns"], rd_body)]
         rc_body = [[k, "—" if v is None else f"{v:.3f}"] for k, v in res["rc"].items()]
         parts += ["\n### RC per suite\n\n", _table(["suite", "RC"], rc_body)]
-        g_body = [[s] + [_cell(main, suite=s, gripper=g) for g in ("open", "closed")] for s in suites]
+        g_body = [[_name(s, m)] + [_cell(main, suite=m, gripper=g) for g in ("open", "closed")] for s, m in groups]
         g_body.append(["**all**"] + [_cell(main, gripper=g) for g in ("open", "closed")])
         parts += ["\n### Gripper initialization: open vs closed\n\n", _table(["suite", "open", "closed"], g_body)]
         if len(ecfg.chunk_sizes) > 1:
@@ -173,6 +231,12 @@ def plots(data: dict, ecfg: EvalConfig, out: Path) -> list[str]:
     plt.close(fig)
     written.append("gripper.png")
 
+    if any(v is not None for p in pols for v in data["policies"][p]["libero_success"].values()):
+        written.append(_libero_plot(data, pols, out, plt, np))
+
+    if any(v["scenes"] for p in pols for v in data["policies"][p]["rd"].values()):
+        written.append(_rd_phase_plot(data, pols, out, plt, np))
+
     if len(ecfg.chunk_sizes) > 1:
         fig, ax = plt.subplots(figsize=(4.5, 3))
         for pol in pols:
@@ -192,13 +256,64 @@ def plots(data: dict, ecfg: EvalConfig, out: Path) -> list[str]:
     return written
 
 
+PHASES = ("pre", "during", "post")
+
+
+def _libero_plot(data: dict, pols: list[str], out: Path, plt, np) -> str:
+    """Standard LIBERO success (official init states) beside RSR, bars per suite, one panel
+    per policy: how much of a policy's benchmark success survives its own failures."""
+    fig, axes = plt.subplots(1, len(pols), figsize=(1.2 + 1.1 * len(data["policies"][pols[0]]["libero_success"])
+                                                     * len(pols), 3.4), squeeze=False)
+    for ax, pol in zip(axes[0], pols, strict=True):
+        res = data["policies"][pol]
+        suites = list(res["libero_success"])
+        rsr = {**{s: v["all"] for s, v in res["rsr_suite_level"].items()}, "all": res["rsr"]}
+        x = np.arange(len(suites))
+        for k, (label, vals) in enumerate((("LIBERO (official init)", res["libero_success"]), ("LIBERO-Recover RSR", rsr))):
+            ys = [np.nan if vals.get(s) is None else 100 * vals[s] for s in suites]
+            ax.bar(x + (k - 0.5) * 0.38, ys, 0.38, label=label)
+        ax.set_xticks(x, suites, rotation=30, ha="right", fontsize=8)
+        ax.set_ylim(0, 125)  # headroom: the legend sits above the bars
+        ax.set_yticks(range(0, 101, 20))
+        ax.set_ylabel("success %")
+        ax.set_title(f"LIBERO vs RSR — {pol}")
+        ax.legend(fontsize=7, ncol=2, loc="upper center")
+    fig.tight_layout()
+    write_with(out / "libero_vs_rsr.png", lambda p: fig.savefig(p, dpi=120))
+    plt.close(fig)
+    return "libero_vs_rsr.png"
+
+
+def _rd_phase_plot(data: dict, pols: list[str], out: Path, plt, np) -> str:
+    """Success of the RD reruns per phase (pre / during / post), one line per suite, one
+    panel per policy: the three-phase drop."""
+    fig, axes = plt.subplots(1, len(pols), figsize=(4.2 * len(pols), 3.2), squeeze=False)
+    for ax, pol in zip(axes[0], pols, strict=True):
+        for suite, v in data["policies"][pol]["rd"].items():
+            if not v["scenes"]:
+                continue
+            ys = [np.nan if v[f"m_{ph}"] is None else 100 * v[f"m_{ph}"] for ph in PHASES]
+            ax.plot(range(3), ys, marker="o", label=suite, linestyle="--" if suite == "all" else "-")
+        ax.set_xticks(range(3), PHASES)
+        ax.set_ylim(-5, 105)
+        ax.set_ylabel("rerun success %")
+        ax.set_title(f"RD phases — {pol}")
+        ax.legend(fontsize=7)
+    fig.tight_layout()
+    write_with(out / "rd_phases.png", lambda p: fig.savefig(p, dpi=120))
+    plt.close(fig)
+    return "rd_phases.png"
+
+
 def write_report(rows: list[MetricRow], ecfg: EvalConfig, out: str | Path, scenes_dir=None,
-                 problems: list[str] | None = None, planned: int | None = None) -> dict:
+                 problems: list[str] | None = None, planned: int | None = None, split_note: str | None = None) -> dict:
     out = Path(out)
     data = compute(rows, ecfg)
     scene_rows = M.select(rows, mode="scene")
     header = (f"Scenes: `{scenes_dir}` ({len({r.scene_id for r in scene_rows})} evaluated); "
               f"trials recorded: {len(rows)}" + (f" of {planned} planned" if planned is not None else "") + ".\n")
+    if split_note:
+        header += f"\nEvaluated: {split_note}.\n"
     if problems:
         header += "\nProblems (skipped):\n\n" + "".join(f"- {p}\n" for p in problems)
     figs = plots(data, ecfg, out)

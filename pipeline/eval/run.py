@@ -23,7 +23,7 @@ from pipeline.config import Config, save_resolved
 from pipeline.errors import FatalError
 from pipeline.eval.plan import default_scenes_dir
 from pipeline.eval.records import EvalEpisode, read_episodes, write_episodes
-from pipeline.eval.scenes import find_scenes
+from pipeline.eval.scenes import choose_split, find_scenes
 from pipeline.eval.stage import EvalStage
 from pipeline.layout import EvalLayout, RunLayout
 
@@ -51,6 +51,11 @@ def run(cfg: Config) -> Path:
         scenes, problems = find_scenes(scenes_dir)
     except (FileNotFoundError, ValueError) as e:
         raise FatalError(f"eval: cannot read scenes: {e}") from None
+    found = len(scenes)
+    scenes, split_note = choose_split(scenes, cfg.eval.split)
+    if found and not scenes:
+        raise FatalError(f"eval: none of the {found} scenes under {scenes_dir} is in the {cfg.eval.split} split "
+                         f"(choose another with `recover eval --split train|all` or eval.split)")
     if cfg.eval.max_scenes is not None:
         scenes = scenes[: cfg.eval.max_scenes]
     if not scenes:
@@ -75,5 +80,5 @@ def run(cfg: Config) -> Path:
     from pipeline.eval.report import write_report
 
     write_report(read_rows(layout.episodes), cfg.eval, out, scenes_dir=scenes_dir, problems=problems,
-                 planned=len(trials))
+                 planned=len(trials), split_note=split_note)
     return out

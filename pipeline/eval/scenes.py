@@ -36,6 +36,8 @@ class Scene:
     instruction: str | None = None
     init_state: int | None = None  # official init state the source episode started from
     history_paths: tuple[Path, ...] = field(default_factory=tuple)
+    split: str | None = None  # train | eval in a release with a split; None: no split
+    fail_step: int | None = None  # the (reviewed) failure onset of a released scene; None: unknown
 
     @property
     def scene_id(self) -> str:
@@ -58,7 +60,8 @@ def _from_manifest(root: Path, manifest: Path) -> tuple[list[Scene], list[str]]:
             problems.append(f"{manifest}: scene {r.suite}/{r.task}/{r.episode_id} step {r.step}: missing {missing}")
             continue
         scenes.append(Scene(r.suite, r.task, r.episode_id, r.step, bddl, state, r.level, r.category,
-                            r.instruction, r.init_state, tuple(root / h for h in r.history_paths)))
+                            r.instruction, r.init_state, tuple(root / h for h in r.history_paths),
+                            None if r.split is None else str(r.split), r.fail_step))
     return scenes, problems
 
 
@@ -88,6 +91,23 @@ def find_scenes(root: str | Path) -> tuple[list[Scene], list[str]]:
     scenes, problems = _from_manifest(root, manifest) if manifest.is_file() else _from_layout(root)
     scenes.sort(key=lambda s: (s.suite, s.task, s.episode_id, s.step))
     return scenes, problems
+
+
+def choose_split(scenes: list[Scene], which: str) -> tuple[list[Scene], str]:
+    """The scenes of one side of the release's train/eval split (`eval.split`: eval, train or
+    all) and a sentence for the report saying which were evaluated."""
+    if which not in ("eval", "train", "all"):
+        raise ValueError(f"eval.split must be eval, train or all, got {which!r}")
+    if not any(s.split is not None for s in scenes):
+        return scenes, f"all {len(scenes)} scenes (the scene folder has no train/eval split)"
+    if which == "all":
+        n_train = sum(s.split == "train" for s in scenes)
+        return scenes, (f"all {len(scenes)} scenes, train ({n_train}) and eval ({len(scenes) - n_train}) alike: "
+                        f"scores on train scenes are not held out")
+    chosen = [s for s in scenes if s.split == which]
+    note = f"the {which} split: {len(chosen)} of {len(scenes)} scenes"
+    return chosen, note + (" (the scenes recovery demonstrations were recorded on: not held out)"
+                           if which == "train" else " (held out from the recovery demonstrations)")
 
 
 def scene_task(scene: Scene) -> TaskSpec:

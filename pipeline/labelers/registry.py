@@ -14,6 +14,18 @@ from pipeline.labelers.base import Characterizer, Localizer
 BACKENDS = ("simstate", "openai", "transformers")
 
 
+def describe(cfg: VLMConfig) -> str:
+    """What a labeler's answers depend on: `simstate`, or backend, model, prompt version and
+    language, and the prompt files' digest (so an edited prompt file also counts)."""
+    if cfg.backend == "simstate":
+        return "simstate"
+    from pipeline.labelers.vlm.prompts import prompts_digest
+
+    model = cfg.openai.model if cfg.backend == "openai" else str(cfg.transformers.model_path)
+    digest = prompts_digest(cfg.language, cfg.prompt_version, cfg.prompts_dir)
+    return f"{cfg.backend}:{model}:{cfg.prompt_version}:{cfg.language}:{digest}"
+
+
 def _check(name: str) -> None:
     if name not in BACKENDS:
         raise ConfigError(f"vlm.backend: {name!r} is not a labeler; choose one of {BACKENDS}")

@@ -7,6 +7,19 @@ Inputs: an `Observation` with agentview and wrist images rendered at `env_resolu
                                                 of the 256 px frame, as the example resizes
     observation/state   float32 (8,): eef position, eef axis-angle, gripper qpos (2)
     prompt              the task instruction
+and, when `eval.temporal_context` asks for it (the eval puts it in `Observation.context`):
+    observation/temporal_context        "initial_frame" or "history"
+    initial_frame:
+    observation/initial_image, observation/initial_wrist_image
+                        (224, 224, 3) uint8: the task's official initial state the source
+                        episode started from, prepared like the current images
+    history:
+    observation/history_image, observation/history_wrist_image
+                        (k, 224, 224, 3) uint8, k <= 8: the scene's pre-failure history
+                        (`stage2.history`, oldest first), rendered from its logged states
+    observation/history_state   float32 (k, 8): the state of each history frame, as above
+    observation/history_steps   int32 (k,): their steps in the source rollout
+A server whose policy does not read them ignores extra keys.
 Received: `actions`, an (N, 7) chunk (N >= 1), returned as float64.
 
 Orientation: openpi's LIBERO example feeds robosuite's raw offscreen image rotated by
@@ -67,13 +80,49 @@ def prepare_image(img: np.ndarray, size: int, rotate_180: bool) -> np.ndarray:
 CAMERAS = ("agentview", "robot0_eye_in_hand")
 
 
+# camera -> the request key's stem (the current frame's keys without `observation/`)
+IMAGE_KEYS = {"agentview": "image", "robot0_eye_in_hand": "wrist_image"}
+
+
+def history_states(history: dict) -> np.ndarray:
+    """(k, 8) LIBERO states of a pre-failure history (its grip-site quaternions, w x y z)."""
+    quats = np.asarray(history["eef_quat"], dtype=np.float64).reshape(-1, 4)
+    rows = [np.concatenate([p, quat_xyzw_to_axis_angle(_hand_quat_from_site(q)), g])
+            for p, q, g in zip(history["eef_pos"], quats, history["gripper_qpos"], strict=True)]
+    return np.asarray(rows, dtype=np.float32).reshape(len(rows), 8)
+
+
+def context_request(context: dict, cfg: OpenpiPolicyConfig) -> dict:
+    """The temporal-context keys of a request (module docstring); {} without a context."""
+    kind = context.get("kind")
+    out: dict = {}
+    if kind == "initial_frame":
+        for cam, key in IMAGE_KEYS.items():
+            out[f"observation/initial_{key}"] = prepare_image(context["initial_images"][cam], cfg.image_size,
+                                                              cfg.rotate_180)
+    elif kind == "history" and context.get("history_images"):
+        for cam, key in IMAGE_KEYS.items():
+            frames = context["history_images"][cam]
+            out[f"observation/history_{key}"] = np.stack(
+                [prepare_image(f, cfg.image_size, cfg.rotate_180) for f in frames])
+        hist = context["history"]
+        k = len(context["history_images"]["agentview"])
+        out["observation/history_state"] = history_states(hist)[-k:]
+        out["observation/history_steps"] = np.asarray(hist["steps"], dtype=np.int32)[-k:]
+    if out:
+        out["observation/temporal_context"] = kind
+    return out
+
+
 def openpi_request(obs: Observation, cfg: OpenpiPolicyConfig) -> dict:
-    """The observation dict openpi's LIBERO example sends for `obs` (images at `env_resolution`)."""
+    """The observation dict openpi's LIBERO example sends for `obs` (images at `env_resolution`),
+    with the temporal context when the observation carries one."""
     return {
         "observation/image": prepare_image(obs.images["agentview"], cfg.image_size, cfg.rotate_180),
         "observation/wrist_image": prepare_image(obs.images["robot0_eye_in_hand"], cfg.image_size, cfg.rotate_180),
         "observation/state": libero_state(obs),
         "prompt": str(obs.instruction),
+        **context_request(obs.context, cfg),
     }
 
 
@@ -81,6 +130,8 @@ class OpenpiPolicy:
     """`Policy` backed by a remote openpi server; one websocket per worker process."""
 
     cameras: tuple[str, ...] = CAMERAS
+    # the eval hands it `eval.temporal_context` (initial frame or history), sent as extra keys
+    accepts_context: bool = True
 
     def __init__(self, cfg: OpenpiPolicyConfig, name: str | None = None):
         from openpi_client.websocket_client_policy import WebsocketClientPolicy

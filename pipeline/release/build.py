@@ -1,16 +1,20 @@
 """`recover release`: assemble the scenario set from final reviewed annotations.
 
-Inputs: the run folder (see `pipeline.release.sources`) and `cfg.release`.
+Inputs: the run folder (see `pipeline.release.sources`), the run folders of
+`release.merge_runs` (other generators or seeds, same task selection) and `cfg.release`.
 Output folder (default `<run>/release/`):
     selected_bddl_scenes_<suite>/<task>/episode_<id>/step_<NNNN>.bddl
                                                     step_<NNNN>_sim_state.npy
                                                     step_<NNNN>_history[...]   pre-failure history
-    scenarios.parquet        the manifest (`pipeline.release.manifest`), certificate included
-    README.md, figures/      the dataset card (`pipeline.release.card`)
+    scenarios.parquet        the manifest (`pipeline.release.manifest`), certificate and split included
+    split.json               the train/eval split's seed, share and counts (`pipeline.release.split`)
+    README.md, figures/      the dataset card (`pipeline.release.card`) and the object positions
+                             against the official init states (`pipeline.release.positions`)
     SHA256SUMS               every released file above (`sha256sum -c SHA256SUMS` works)
     _build/                  NOT part of the set: build time, quarantined annotations, certificates
                              (`_build/certificates/_done/`, see `pipeline.release.certify`),
-                             `recover verify`'s results (`_build/verify/_done/`)
+                             `recover verify`'s results (`_build/verify/_done/`), object positions
+                             per task model (`_build/positions/_done/`)
 Invariants: released bytes depend only on the inputs and the config (no timestamps, no
 absolute paths, sorted rows), so the same config and seed rebuild them byte for byte; scene
 files are copied unchanged; files of scenes no longer released are removed.
@@ -26,12 +30,17 @@ from rich.console import Console
 
 from pipeline.atomic import write_bytes, write_json, write_text
 from pipeline.config import Config
-from pipeline.layout import RELEASE_BUILD, RELEASE_CARD, RELEASE_SUMS, SCENE_PREFIX, STATE_SUFFIX, ReleaseLayout, RunLayout
+from pipeline.errors import FatalError
+from pipeline.layout import RESOLVED_CONFIG, RELEASE_BUILD, RELEASE_CARD, RELEASE_SPLIT, RELEASE_SUMS, SCENE_PREFIX, STATE_SUFFIX, ReleaseLayout, RunLayout
 from pipeline.release.card import FIGURE, render_card, write_figure
+from pipeline.release.positions import FIGURE as POSITIONS_FIGURE
+from pipeline.release.positions import collect
+from pipeline.release.positions import write_figure as write_positions_figure
 from pipeline.release.certify import certify_all, scene_refs
 from pipeline.release.manifest import MANIFEST_NAME, ScenarioRow, sha256_file, write_manifest
 from pipeline.records import QuarantineEntry, QuarantineReason
 from pipeline.release.sources import ReleaseItem, gather
+from pipeline.release.split import apply as apply_split
 
 if TYPE_CHECKING:
     from pipeline.executors import Executor
@@ -75,7 +84,7 @@ def _row(item: ReleaseItem, out: Path, bddl: str, state: str, history: list[str]
         init_state=ep.init_state, step=item.step, fail_time_s=a.fail_time_s, fail_step=a.fail_step,
         level=a.recovery_level, category=a.failure_category, recovery_action=a.recovery_action,
         policy=ep.policy,
-        policy_kind=ep.policy_kind, seed=ep.seed, localize_prompt_hash=loc.prompt_hash,
+        policy_kind=ep.policy_kind, generator=ep.generator, seed=ep.seed, localize_prompt_hash=loc.prompt_hash,
         characterize_prompt_hash=char_hash, reviewers=len({r.reviewer for r in a.reviews}),
         adjudicated=a.adjudication is not None, state_dim=state_dim,
         bddl_path=bddl, bddl_sha256=sha256_file(out / bddl), state_path=state,
@@ -96,12 +105,44 @@ def _remove_stale(out: Path, keep: set[str]) -> int:
     return removed
 
 
+def _tasks_of(run: Path) -> dict | None:
+    import yaml
+
+    resolved = RunLayout(run).stage1.root / RESOLVED_CONFIG
+    return (yaml.safe_load(resolved.read_text()) or {}).get("tasks") if resolved.is_file() else None
+
+
+def gather_runs(cfg: Config) -> tuple[list[ReleaseItem], list[QuarantineEntry]]:
+    """The release items of this run and of `release.merge_runs`: same task selection (from
+    each run's resolved stage-1 config, where it has one), every episode key once."""
+    runs = [Path(cfg.out)] + [Path(r) for r in cfg.release.merge_runs]
+    items, skipped, origin = [], [], {}
+    for run in runs:
+        if not run.is_dir():
+            raise FatalError(f"release.merge_runs: {run}: no such run folder")
+        if run != runs[0] and (theirs := _tasks_of(run)) is not None and (ours := _tasks_of(runs[0])) is not None \
+                and theirs != ours:
+            raise FatalError(f"release.merge_runs: {run} selects other tasks than {runs[0]} (stage1/{RESOLVED_CONFIG}"
+                             f" `tasks`: {theirs} vs {ours}); a merged release covers one task selection")
+        got, left = gather(run, cfg.stage2)
+        for it in got:
+            key = it.annotation.key
+            if key in origin:
+                raise FatalError(f"release.merge_runs: episode {key} is in both {origin[key]} and {run}; give the "
+                                 f"generators different names (stage1.policy.name) or seeds")
+            origin[key] = run
+        items += got
+        skipped += left
+    items.sort(key=lambda it: (it.episode.suite, it.episode.task, it.episode.episode_id))
+    return items, skipped
+
+
 def build(cfg: Config, console: Console | None = None, executor: Executor | None = None) -> list[ScenarioRow]:
     import numpy as np
 
     console = console or Console()
     out = release_dir(cfg)
-    items, skipped = gather(cfg.out, cfg.stage2)
+    items, skipped = gather_runs(cfg)
     rows = []
     for item in items:
         try:  # a state that does not load is set aside here; verify checks the rest
@@ -123,8 +164,16 @@ def build(cfg: Config, console: Console | None = None, executor: Executor | None
                                                  "certify_successes": c.successes,
                                                  "certify_reason": c.reason})
 
+    positions = collect(refs, cfg, out / BUILD_DIR / "positions", executor=executor, console=console)
+    for p in positions:
+        if p["note"]:
+            console.print(f"[yellow]object positions[/yellow] {p['note']}", highlight=False)
+
+    rows, split = apply_split(rows, cfg.release.split)
     write_manifest(out / MANIFEST_NAME, rows)
+    write_json(ReleaseLayout(out).split, split.model_dump(mode="json"))
     write_figure(rows, out / FIGURE)
+    write_positions_figure(positions, out / POSITIONS_FIGURE)
     hashes = {
         "localization": sorted({r.localize_prompt_hash for r in rows if r.localize_prompt_hash}),
         "characterization": sorted({r.characterize_prompt_hash for r in rows if r.characterize_prompt_hash}),
@@ -132,7 +181,8 @@ def build(cfg: Config, console: Console | None = None, executor: Executor | None
     people = {r.reviewer for it in items for r in it.annotation.reviews}
     write_text(ReleaseLayout(out).card, render_card(rows, cfg, hashes, len(people)))
 
-    released = sorted({p for r in rows for p, _ in r.files()} | {MANIFEST_NAME, FIGURE, RELEASE_CARD})
+    released = sorted({p for r in rows for p, _ in r.files()}
+                      | {MANIFEST_NAME, FIGURE, POSITIONS_FIGURE, RELEASE_CARD, RELEASE_SPLIT})
     removed = _remove_stale(out, set(released))
     write_text(out / SUMS_NAME, "".join(f"{sha256_file(out / p)}  {p}\n" for p in released))
 

@@ -1,7 +1,8 @@
 """The dataset card: `README.md` (tables and provenance) and a stacked-bar PNG.
 
 Inputs: the manifest rows, the resolved config, the package versions. Outputs: markdown
-text and `figures/scenes_by_suite_level.png`. Invariant: deterministic bytes for the same
+text and `figures/scenes_by_suite_level.png` (the object-positions figure beside it is
+`pipeline.release.positions`'s). Invariant: deterministic bytes for the same
 inputs (no dates, no absolute paths: output folders and database URLs are redacted from
 the config; PNG written without software/date metadata).
 """
@@ -16,9 +17,10 @@ from pathlib import Path
 import yaml
 
 from pipeline.atomic import write_with
-from pipeline.config import Config
+from pipeline.config import Config, reported_suites
 from pipeline.records import Category, Level
 from pipeline.release.manifest import ScenarioRow
+from pipeline.release.positions import FIGURE as POSITIONS_FIGURE
 
 FIGURE = "figures/scenes_by_suite_level.png"
 LEVELS = [lv.value for lv in Level]
@@ -40,6 +42,9 @@ def portable_config(cfg: Config) -> dict:
     d = cfg.model_dump(mode="json")
     d["run"]["output_dir"] = "<run>"
     d["release"]["output_dir"] = None
+    # located elsewhere and renamed by `recover reproduce`: counted, not named (the generator
+    # table says what each contributed)
+    d["release"]["merge_runs"] = [f"<merged run {i + 1}>" for i in range(len(d["release"].get("merge_runs", [])))]
     for stage in ("stage3",):
         if d[stage].get("db_url"):
             d[stage]["db_url"] = "<redacted>"
@@ -58,8 +63,10 @@ def write_figure(rows: list[ScenarioRow], path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    suites = sorted({r.suite for r in rows}) or ["(none)"]
-    counts = Counter((r.suite, r.level) for r in rows)
+    groups = reported_suites({r.suite for r in rows}) or [("(none)", ())]
+    suites = [name for name, _ in groups]  # LIBERO-100 as its own bar, from its halves' scenes
+    by_sl = Counter((r.suite, r.level) for r in rows)
+    counts = {(name, lv): sum(by_sl[(m, lv)] for m in members) for name, members in groups for lv in LEVELS}
     fig, ax = plt.subplots(figsize=(1.6 + 1.3 * len(suites), 3.6), dpi=100)
     bottom = [0] * len(suites)
     for level in LEVELS:
@@ -141,14 +148,52 @@ stage-1 rollout replays from its LIBERO init state: `restore(env, init_states[i]
 checks this for every exported rollout and pre-failure history)."""
 
 
-def render_card(rows: list[ScenarioRow], cfg: Config, prompt_hashes: dict[str, list[str]], reviewers: int) -> str:
-    suites = sorted({r.suite for r in rows})
+def _suite_level_rows(rows: list[ScenarioRow]) -> list[list]:
+    """Scenes per suite (LIBERO-100 beside its halves, counted from scenes) and level, and a total."""
     by_sl = Counter((r.suite, r.level) for r in rows)
+    out = []
+    for name, members in reported_suites({r.suite for r in rows}):
+        counts = [sum(by_sl[(m, lv)] for m in members) for lv in LEVELS]
+        out.append([name if members == (name,) else f"*{name}*", *counts, sum(counts)])
+    out.append(["**total**", *(sum(by_sl[(s, lv)] for s in {r.suite for r in rows}) for lv in LEVELS), len(rows)])
+    return out
+
+
+def _split_section(rows: list[ScenarioRow], cfg: Config) -> str:
+    sp = cfg.release.split
+    blocks = []
+    for side in ("train", "eval"):
+        part = [r for r in rows if r.split == side]
+        blocks.append(f"**{side}** ({len(part)} scenes)\n\n" + _table(["suite", *LEVELS, "total"], _suite_level_rows(part)))
+    return (f"Recovery demonstrations (`recover demos`) are recorded on the **train** scenes only, and\n"
+            f"`recover eval` scores policies on the **eval** scenes by default, so a policy fine-tuned on\n"
+            f"the demonstrations is not scored on its own training scenes. A scene is train when\n"
+            f"SHA-256(\"split/<seed>/<scene id>\") read as a number in [0, 1) is below the train share\n"
+            f"(seed {sp.seed}, train share {sp.train_share}): uniform within every suite x level, the same for\n"
+            f"the same seed, and unchanged for existing scenes when scenes are added; a suite with two or\n"
+            f"more scenes always gets one train scene, and a suite x level with two or more scenes keeps\n"
+            f"one eval scene. The column `split` of `scenarios.parquet`\n"
+            f"and `split.json` record it; `recover verify` redraws it.\n\n" + "\n\n".join(blocks))
+
+
+def _generators(rows: list[ScenarioRow]) -> str:
+    """Scenes per generator (`kind:name@params hash`) and split: a merged release has several."""
+    gens = sorted({r.generator or f"{r.policy_kind}:{r.policy}" for r in rows})
+    body = []
+    for g in gens:
+        part = [r for r in rows if (r.generator or f"{r.policy_kind}:{r.policy}") == g]
+        body.append([f"`{g}`", len(part), sum(r.split == "train" for r in part), sum(r.split == "eval" for r in part)])
+    return (_table(["generator (kind:name@params hash)", "scenes", "train", "eval"], body or [["(none)", 0, 0, 0]])
+            + "\n\nThe hash is of the generator's recorded parameters (`policy_params` in the source run's"
+            "\n`stage1/episodes.parquet`: noise levels, server, checkpoint); `release.merge_runs` merges\nthe "
+            "scenes of several runs (generators or seeds) into one release.")
+
+
+def render_card(rows: list[ScenarioRow], cfg: Config, prompt_hashes: dict[str, list[str]], reviewers: int) -> str:
     by_cat = Counter(r.category for r in rows)
     certified = sum(r.certified is True for r in rows)
     attempted = sum(r.certified is not None for r in rows)
-    level_rows = [[s, *(by_sl[(s, lv)] for lv in LEVELS), sum(by_sl[(s, lv)] for lv in LEVELS)] for s in suites]
-    level_rows.append(["**total**", *(sum(by_sl[(s, lv)] for s in suites) for lv in LEVELS), len(rows)])
+    level_rows = _suite_level_rows(rows)
     cat_rows = [[c, by_cat[c]] for c in CATEGORIES if by_cat[c]] or [["(none)", 0]]
     hashes = "\n".join(f"- {k}: {', '.join(f'`{h}`' for h in v) or '(none)'}" for k, v in prompt_hashes.items())
     vers = "\n".join(f"- {k}: {v}" for k, v in versions().items())
@@ -168,11 +213,28 @@ the SHA-256 of each file; `recover verify <this folder>` checks a copy.
 
 {_table(["suite", *LEVELS, "total"], level_rows)}
 
+*libero_100* is LIBERO-10 and LIBERO-90 together (the reference's LIBERO-100), counted from
+their scenes: with libero_spatial, libero_object and libero_goal it makes the 16 evaluation
+dimensions of the reference (4 suites x 4 levels). The total counts each scene once.
+
 ![scenes by suite and level]({FIGURE})
+
+Where the scenes put the objects, against LIBERO's official init states of the same tasks
+(x/y on the table of every movable object; grey: the official init states, red: the scenes):
+
+![object positions: scenes vs official init states]({POSITIONS_FIGURE})
+
+## Train / eval split
+
+{_split_section(rows, cfg)}
 
 ## Scenes per failure category
 
 {_table(["category", "scenes"], cat_rows)}
+
+## Scenes per failure generator
+
+{_generators(rows)}
 
 ## Recoverability certificate
 

@@ -10,14 +10,16 @@ original instruction; episodes.jsonl also names each demo's scene id, level and
 category), each a LeRobot v2.1 dataset (`pipeline.release.lerobot_format`). Frames are rendered from the
 logged states at 20 Hz (every control step), third-person and wrist cameras, right side
 up, at `release.lerobot_render_quality` (standard: LIBERO's look); state = eef position, eef
-axis-angle, the two gripper finger positions (8-D, as in LIBERO's LeRobot datasets); action =
-the 7-D command, float32 as in LIBERO's LeRobot datasets, and beside it `action_float64`, the
-same command exactly as the simulator stepped it (the source episode's `actions.npy`): only
-those replay bit for bit. `episodes.jsonl` says where each episode began (`init_state` and
-`settle_steps` of a rollout or history, `scene_id` of a demo). Before an episode is written its
-actions are replayed in plain LIBERO from where it began (`pipeline.release.replay`:
-a rollout or history from its init state and stage 1's settle, a demo from its scene) and
-must give its logged states bit for bit, or the episode is set aside.
+axis-angle, the two gripper finger positions (8-D, as in LIBERO's LeRobot datasets), with the
+arm's joint states beside it (`observation.states.joint_state`: the 7 joint positions;
+`observation.states.gripper_state`: the 2 finger joints); action = the 7-D command, float32 as
+in LIBERO's LeRobot datasets, and beside it `action_float64`, the same command exactly as the
+simulator stepped it (the source episode's `actions.npy`): only those replay bit for bit.
+`episodes.jsonl` says where each episode began (`init_state` and `settle_steps` of a rollout or
+history, `scene_id` of a demo). Before an episode is written its actions are replayed in plain
+LIBERO from where it began (`pipeline.release.replay`: a rollout or history from its init state
+and stage 1's settle, a demo from its scene) and must give its logged states bit for bit, or
+the episode is set aside.
 
 Episodes are rendered in parallel as a `Stage` (pipeline/runner/) on the run's executor: one
 unit per episode, the episodes of one simulator model (suite, task, BDDL content) share a
@@ -42,8 +44,8 @@ from rich.console import Console
 from pipeline.atomic import write_json, write_with
 from pipeline.config import Config
 from pipeline.errors import ConfigError, FatalError
-from pipeline.layout import EpisodeFiles, RunLayout, episode_key
-from pipeline.records import read_episodes
+from pipeline.layout import EpisodeFiles, RunLayout, Stage1Layout, episode_key
+from pipeline.records import EpisodeRecord, read_episodes
 from pipeline.release import lerobot_format as fmt
 from pipeline.release.manifest import MANIFEST_NAME
 from pipeline.release.replay import ReplayStart, check_exported
@@ -66,6 +68,7 @@ class ExportEpisode:
     bddl: Path | None = None  # the scene's own BDDL (recovery demos); None: the task's
     meta: dict = field(default_factory=dict)  # extra episodes.jsonl fields
     start: ReplayStart | None = None  # where it began: its actions must replay from there
+    split: str = "train"  # its side of the release's train/eval split (info.json's `splits`)
 
     def spec(self) -> TaskSpec:
         """The task whose model renders it (with the scene's own BDDL where it has one)."""
@@ -95,6 +98,15 @@ def render_episode(env: SimEnv, states: np.ndarray, size: int,
     return np.asarray(robot), {k: np.stack(v) for k, v in frames.items()}
 
 
+def joint_states(env: SimEnv, states: np.ndarray) -> np.ndarray:
+    """The arm's 7 joint positions (robot0_joint1..7) for each logged simulator state."""
+    out = []
+    for s in states:
+        env.set_state(s)
+        out.append(env.arm_joints()[0])
+    return np.asarray(out).reshape(len(states), 7)
+
+
 def write_video(path: Path, frames: np.ndarray) -> None:
     import av
 
@@ -119,18 +131,39 @@ def start_meta(e) -> dict:
     """Where a stage-1 episode began (episodes.jsonl): LIBERO's init state `init_state` of its
     task, restored as the card says, then `settle_steps` actions [0, 0, 0, 0, 0, 0, -1]."""
     return {"init_state": e.init_state, "settle_steps": e.settle_steps}
+def by_split(episodes: list[ExportEpisode]) -> list[ExportEpisode]:
+    """Train episodes first, then eval (LeRobot's `splits` are index ranges), each by key."""
+    return sorted(episodes, key=lambda x: (x.split != "train", x.key))
+
+
+def eval_episode_keys(manifest: Path) -> set[str]:
+    """Stage-1 episodes a released eval scene was cut from: their rollouts lead into held-out
+    scenes, so they sit in the eval split of the rollouts dataset."""
+    from pipeline.release.manifest import read_manifest
+
+    if not manifest.is_file():
+        return set()
+    return {episode_key(r.suite, r.task, r.episode_id) for r in read_manifest(manifest) if r.split == "eval"}
+
+
+def stage1_episodes(cfg: Config) -> list[tuple[Stage1Layout, EpisodeRecord]]:
+    """(stage-1 layout, episode) of this run and of every `release.merge_runs` run."""
+    layouts = [RunLayout.of(cfg).stage1] + [RunLayout(Path(r)).stage1 for r in cfg.release.merge_runs]
+    return [(st, e) for st in layouts for e in read_episodes(st.manifest)]
 
 
 def rollout_episodes(cfg: Config) -> list[ExportEpisode]:
-    stage1 = RunLayout.of(cfg).stage1
+    layout = RunLayout.of(cfg)
+    held_out = eval_episode_keys(layout.release.manifest)
     out = []
-    for e in read_episodes(stage1.manifest):
+    for stage1, e in stage1_episodes(cfg):
         if cfg.release.lerobot_episodes == "failures" and e.success:
             continue
         out.append(ExportEpisode(e.key, e.suite, e.task, e.instruction, stage1.episode(e).dir, e.steps,
                                  meta=start_meta(e), start=ReplayStart(init_state=e.init_state,
-                                                                       settle_steps=e.settle_steps)))
-    return sorted(out, key=lambda x: x.key)
+                                                                       settle_steps=e.settle_steps),
+                                 split="eval" if e.key in held_out else "train"))
+    return by_split(out)
 
 
 def history_episodes(cfg: Config, manifest: Path) -> list[ExportEpisode]:
@@ -138,16 +171,16 @@ def history_episodes(cfg: Config, manifest: Path) -> list[ExportEpisode]:
 
     if not manifest.is_file():
         return []
-    stage1 = RunLayout.of(cfg).stage1
-    eps = {e.key: e for e in read_episodes(stage1.manifest)}
+    eps = {e.key: (stage1, e) for stage1, e in stage1_episodes(cfg)}  # merged runs' too
     out = []
     for r in read_manifest(manifest):
-        e = eps.get(episode_key(r.suite, r.task, r.episode_id))
+        stage1, e = eps.get(episode_key(r.suite, r.task, r.episode_id), (None, None))
         if e is not None and r.fail_step >= 1:
             out.append(ExportEpisode(f"{e.key}@{r.step}", r.suite, r.task, r.instruction, stage1.episode(e).dir,
                                      min(r.fail_step, e.steps), meta=start_meta(e),
-                                     start=ReplayStart(init_state=e.init_state, settle_steps=e.settle_steps)))
-    return sorted(out, key=lambda x: x.key)
+                                     start=ReplayStart(init_state=e.init_state, settle_steps=e.settle_steps),
+                                     split="eval" if r.split == "eval" else "train"))
+    return by_split(out)
 
 
 def recovery_episodes(cfg: Config, release: Path) -> list[ExportEpisode]:
@@ -158,11 +191,12 @@ def recovery_episodes(cfg: Config, release: Path) -> list[ExportEpisode]:
     root = recoveries.root
     if not recoveries.demos.is_file() or not (release / MANIFEST_NAME).is_file():
         return []
-    rows = {scene_id(r): r for r in read_manifest(release / MANIFEST_NAME)}
+    # demos of eval scenes (recorded before the release had a split) would leak held-out scenes
+    rows = {scene_id(r): r for r in read_manifest(release / MANIFEST_NAME) if r.split != "eval"}
     bddl = {sid: release / r.bddl_path for sid, r in rows.items()}
     out = []
     for d in read_demos(recoveries.demos):
-        if d.scene_id not in bddl:  # a demo of a scene no longer released
+        if d.scene_id not in bddl:  # a demo of a scene no longer released (or now held out)
             continue
         out.append(ExportEpisode(f"{d.scene_id}/demo_{d.demo_index}", d.suite, d.task, d.instruction, root / d.path,
                                  d.steps, bddl[d.scene_id],
@@ -182,12 +216,12 @@ def export_episode(env: SimEnv, ep: ExportEpisode, i: int, start: int, task_inde
     states = np.load(files.states)[: ep.length]
     actions = np.load(files.actions, allow_pickle=False)[: ep.length]  # float64, as stepped
     robot, frames = render_episode(env, states, size, quality)
-    table = fmt.frame_table(robot, actions, i, start, task_index)
+    table = fmt.frame_table(robot, actions, i, start, task_index, joint_states(env, states))
     write_with(root / fmt.data_path(i), lambda p: pq.write_table(table, p))
     for key, f in frames.items():
         write_video(root / fmt.video_path(i, key), f)
     return {"episode_index": i, "tasks": [ep.instruction], "length": ep.length, "source": ep.key,
-            "meta": ep.meta, "stats": fmt.episode_stats(table, frames)}
+            "meta": ep.meta, "split": ep.split, "stats": fmt.episode_stats(table, frames)}
 
 
 @dataclass

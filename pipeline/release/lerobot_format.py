@@ -36,6 +36,12 @@ VIDEO_KEYS = {"observation.images.image": "agentview", "observation.images.wrist
 STATE_NAMES = ["x", "y", "z", "axis_angle1", "axis_angle2", "axis_angle3", "gripper_left", "gripper_right"]
 ACTION_NAMES = ["dx", "dy", "dz", "droll", "dpitch", "dyaw", "gripper"]
 ACTION_F64 = "action_float64"
+# the arm's joint states beside the end-effector state, under the keys of LIBERO's LeRobot
+# datasets (HuggingFaceVLA/libero): robot0's 7 joint positions (base to wrist) and the two
+# finger joint positions; from the recorded MuJoCo states, like everything else here
+JOINT_KEY, GRIPPER_KEY = "observation.states.joint_state", "observation.states.gripper_state"
+JOINT_NAMES = [f"joint_{i}" for i in range(7)]
+GRIPPER_NAMES = ["gripper_left", "gripper_right"]
 
 
 def data_path(ep: int) -> str:
@@ -52,6 +58,8 @@ def features(size: int) -> dict:
     out = {k: {"dtype": "video", "shape": [size, size, 3], "names": ["height", "width", "channel"], "info": video_info}
            for k in VIDEO_KEYS}
     out["observation.state"] = {"dtype": "float32", "shape": [8], "names": STATE_NAMES}
+    out[JOINT_KEY] = {"dtype": "float32", "shape": [7], "names": JOINT_NAMES}
+    out[GRIPPER_KEY] = {"dtype": "float32", "shape": [2], "names": GRIPPER_NAMES}
     out["action"] = {"dtype": "float32", "shape": [7], "names": ACTION_NAMES}
     # the same actions exactly as the simulator stepped them: these replay bit for bit
     out[ACTION_F64] = {"dtype": "float64", "shape": [7], "names": ACTION_NAMES}
@@ -68,6 +76,8 @@ class LeRobotFrame(BaseModel):
     model_config = ConfigDict(extra="forbid", populate_by_name=True)
 
     observation_state: Annotated[list[F32], Len(8, 8)] = Field(alias="observation.state")
+    joint_state: Annotated[list[F32], Len(7, 7)] = Field(alias=JOINT_KEY)
+    gripper_state: Annotated[list[F32], Len(2, 2)] = Field(alias=GRIPPER_KEY)
     action: Annotated[list[F32], Len(7, 7)]
     action_float64: Annotated[list[float], Len(7, 7)]  # `action` before rounding: what was stepped
     timestamp: F32
@@ -81,8 +91,11 @@ class LeRobotFrame(BaseModel):
 FRAME_SCHEMA = arrow_schema(LeRobotFrame, metadata=None, nullable=True)
 
 
-def frame_table(states: np.ndarray, actions: np.ndarray, ep: int, start: int, task_index: int) -> pa.Table:
-    """`actions`: float64 as stepped; `action` holds them rounded to float32, `action_float64` exactly."""
+def frame_table(states: np.ndarray, actions: np.ndarray, ep: int, start: int, task_index: int,
+                joints: np.ndarray) -> pa.Table:
+    """`states`: the 8-D end-effector states (their last two: the fingers); `joints`: the arm's 7
+    joint positions per frame; `actions`: float64 as stepped (`action` holds them rounded to
+    float32, `action_float64` exactly)."""
     n = len(states)
 
     def fixed(a: np.ndarray) -> pa.FixedSizeListArray:
@@ -91,6 +104,8 @@ def frame_table(states: np.ndarray, actions: np.ndarray, ep: int, start: int, ta
 
     return pa.table({
         "observation.state": fixed(states),
+        JOINT_KEY: fixed(joints),
+        GRIPPER_KEY: fixed(np.asarray(states)[:, 6:8]),
         "action": fixed(actions),
         ACTION_F64: pa.FixedSizeListArray.from_arrays(pa.array(np.asarray(actions, dtype=np.float64).reshape(-1),
                                                                pa.float64()), 7),
@@ -148,6 +163,21 @@ def _jsonl(rows: list[dict]) -> str:
     return "".join(json.dumps(r) + "\n" for r in rows)
 
 
+def splits(episodes: list[dict]) -> dict[str, str]:
+    """info.json's `splits`: name -> "start:end" episode range. The episodes come ordered by
+    split (train first: `lerobot_export.by_split`), each split one range; an entry without a
+    `split` is train. An empty split is left out (an empty dataset: train "0:0")."""
+    names = [e.get("split", "train") for e in episodes]
+    out, start = {}, 0
+    for i in range(1, len(names) + 1):
+        if i == len(names) or names[i] != names[start]:
+            if names[start] in out:
+                raise ValueError(f"episodes of split {names[start]!r} are not contiguous (order them by split)")
+            out[names[start]] = f"{start}:{i}"
+            start = i
+    return out or {"train": "0:0"}
+
+
 def write_meta(root: Path, episodes: list[dict], tasks: list[str], size: int, robot_type: str = "panda") -> None:
     """`episodes`: dicts with episode_index, tasks, length, stats (sorted by index) and optional
     `meta` (extra episodes.jsonl fields, e.g. a recovery demo's scene id; LeRobot's converter
@@ -158,7 +188,7 @@ def write_meta(root: Path, episodes: list[dict], tasks: list[str], size: int, ro
         "total_episodes": len(episodes), "total_frames": total_frames, "total_tasks": len(tasks),
         "total_videos": len(episodes) * len(VIDEO_KEYS),
         "total_chunks": (max((e["episode_index"] for e in episodes), default=-1) // CHUNKS_SIZE) + 1,
-        "chunks_size": CHUNKS_SIZE, "fps": FPS, "splits": {"train": f"0:{len(episodes)}"},
+        "chunks_size": CHUNKS_SIZE, "fps": FPS, "splits": splits(episodes),
         "data_path": DATA_PATH, "video_path": VIDEO_PATH, "features": features(size),
     }
     write_text(root / "meta" / "info.json", json.dumps(info, indent=4) + "\n")

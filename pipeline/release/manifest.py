@@ -18,7 +18,7 @@ from pydantic import BaseModel, ConfigDict, ValidationError
 from pipeline.arrow import I64, SCHEMA_METADATA, arrow_schema
 from pipeline.atomic import write_with
 from pipeline.layout import RELEASE_MANIFEST
-from pipeline.vocab import Category, Level
+from pipeline.vocab import Category, Level, Split
 
 MANIFEST_NAME = RELEASE_MANIFEST
 
@@ -57,6 +57,12 @@ class ScenarioRow(BaseModel):
     # why a scene is not certified: the recovery expert's give-up reason, `timeout` or
     # `goal_not_reached`; None when certified or not attempted
     certify_reason: str | None = None
+    # train (recovery demonstrations) or eval (held out), `pipeline.release.split`; None in
+    # a release built before the split
+    split: Split | None = None
+    # the failure generator of the source episode (`EpisodeRecord.generator`: kind, name and
+    # a hash of its parameters); a release merged from several runs has several
+    generator: str | None = None
 
     def files(self) -> list[tuple[str, str]]:
         """(relative path, sha256) of every released file of this scene."""
@@ -68,7 +74,7 @@ class ScenarioRow(BaseModel):
 SCENARIO_SCHEMA = arrow_schema(ScenarioRow, metadata={**SCHEMA_METADATA, "name": "libero-recover scenarios"})
 
 # columns a release built before them lacks; such a manifest still reads (they are None)
-ADDED_LATER = {"certify_reason"}
+ADDED_LATER = {"certify_reason", "split", "generator"}
 
 
 def sha256_file(path: str | Path) -> str:

@@ -1,4 +1,4 @@
-"""`recover demos`: recovery demonstrations, successful recovery-expert rollouts from every released scene.
+"""`recover demos`: recovery demonstrations, successful recovery-expert rollouts from the released train scenes.
 
 Inputs: the release manifest (`<release>/scenarios.parquet`, its scene files) and
 `cfg.release` (`recovery_demos` per scene, `recovery_demo_tries`, `recovery_demo_variation`,
@@ -11,7 +11,8 @@ Outputs under `<run>/recoveries/` (`RunLayout.recoveries`):
     scenes.jsonl       one line per scene: tries, demos, why the other tries failed,
                        `unreplayable` (successful tries dropped for not replaying)
     _done/<scene>.done the scene's line, written after all its demos' videos are back
-Try k of a scene runs the recovery expert with seed `demo_seed(run seed, scene id, k)` and
+Only scenes of the train split (`scenarios.parquet`'s `split`, `pipeline.release.split`) are
+recorded: the eval scenes stay held out for `recover eval`. Try k of a scene runs the recovery expert with seed `demo_seed(run seed, scene id, k)` and
 the configured variation (approach and speed); a try that does not reach the goal is no
 demo: it is counted (with the expert's reason) and its files are not kept. A successful try
 is kept only if it replays: its float64 actions, stepped by robosuite's own `env.step` from
@@ -141,6 +142,14 @@ def read_demos(path: Path) -> list[DemoRecord]:
         except ValidationError as e:
             raise ValueError(f"{path}: row {i} invalid: {e}") from None
     return out
+
+
+def train_rows(rows: list[ScenarioRow]) -> list[ScenarioRow]:
+    """The scenes demonstrations are recorded on: the train split (`pipeline.release.split`),
+    so the eval scenes stay held out; a release built before the split has none, all of it."""
+    if all(r.split is None for r in rows):
+        return list(rows)
+    return [r for r in rows if r.split == "train"]
 
 
 def _unit(row: ScenarioRow) -> str:
@@ -275,6 +284,9 @@ def run(cfg: Config, console: Console | None = None, executor: Executor | None =
         raise FatalError(f"{release / MANIFEST_NAME}: no release to record demos from; run `recover release` first") from None
     except ValueError as e:
         raise FatalError(str(e)) from None
+    released = len(rows)
+    rows = train_rows(rows)
+    console.print(f"recording on the {len(rows)} train scene(s) of {released} released (release.split)")
     stage = DemoStage(cfg, rows)
     root = stage.root
     Runner(executor or make_executor(cfg.executor, worker_env=WORKER_ENV), console=console).run(stage, cfg)

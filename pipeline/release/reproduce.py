@@ -59,9 +59,8 @@ def fresh_config(cfg: Config) -> Config:
     })
 
 
-def rebuild(cfg: Config) -> Config:
-    """Re-run stages 1-2 into the fresh folder, copy the stored annotations, release there."""
-    new = fresh_config(cfg)
+def _rerun(cfg: Config, new: Config) -> None:
+    """Stages 1-2 of `cfg` again into `new`'s fresh folder, with `cfg`'s stored annotations."""
     annotations = RunLayout.of(cfg).stage3.annotations
     if not annotations.is_dir():
         raise FatalError(f"{annotations}: no final reviewed annotations to reproduce from")
@@ -71,6 +70,27 @@ def rebuild(cfg: Config) -> Config:
         module, func = stage.split(":")
         getattr(importlib.import_module(module), func)(new)
     shutil.copytree(annotations, RunLayout.of(new).stage3.annotations)
+
+
+def rebuild(cfg: Config) -> Config:
+    """Re-run stages 1-2 into the fresh folder, copy the stored annotations, release there.
+    A merged release (`release.merge_runs`) re-runs each merged run too, from its own
+    resolved config (`<run>/config.resolved.yaml`), into `<run>.reproduce/`, and merges those."""
+    from pipeline.config import ConfigError, load_config
+    from pipeline.layout import RESOLVED_CONFIG
+
+    merged = []
+    for run in cfg.release.merge_runs:
+        try:
+            other = load_config(Path(run) / RESOLVED_CONFIG)
+        except ConfigError as e:
+            raise FatalError(f"release.merge_runs: cannot reproduce {run}: {e}") from None
+        other_new = fresh_config(other)
+        _rerun(other, other_new)
+        merged.append(other_new.out)
+    new = fresh_config(cfg)
+    new = new.model_copy(update={"release": new.release.model_copy(update={"merge_runs": merged})})
+    _rerun(cfg, new)
     build(new)
     return new
 

@@ -4,7 +4,8 @@ Input: a release folder (`scenarios.parquet` + `selected_bddl_scenes_<suite>/...
 Checks per scene (`verify_scene`): files exist and match the manifest's SHA-256; LIBERO's
 parser accepts the BDDL; objects of one type share one declaration line; the npy loads and
 has the model's state length; the scene restores exactly; the goal does not hold; no object
-moves more than `settle_threshold_m` in `settle_check_steps` zero-action steps. Also: no
+moves more than `settle_threshold_m` in `settle_check_steps` zero-action steps. Also: the
+train/eval split is the one `split.json`'s seed and share draw (`pipeline.release.split`); no
 scene file on disk is missing from the manifest, and nothing sits at the top level that a
 release does not write (`TOP_LEVEL_FILES`, `TOP_LEVEL_DIRS`).
 
@@ -34,8 +35,8 @@ from rich.console import Console
 from rich.table import Table
 
 from pipeline.config import ReleaseConfig
-from pipeline.layout import (RELEASE_BUILD, RELEASE_CARD, RELEASE_SUMS, SCENE_PREFIX, ReleaseLayout, episode_key,
-                             scene_unit)
+from pipeline.layout import (RELEASE_BUILD, RELEASE_CARD, RELEASE_SPLIT, RELEASE_SUMS, SCENE_PREFIX, ReleaseLayout,
+                             episode_key, scene_unit)
 from pipeline.release.manifest import MANIFEST_NAME, ScenarioRow, read_manifest, sha256_file
 from pipeline.release.scene_files import check_bddl, load_state
 from pipeline.release.scene_physics import check_goal_unsatisfied, check_restores, check_settled, scene_task
@@ -49,7 +50,7 @@ CHECKS = ("files", "checksum", "bddl", "state", "restore", "goal", "settled")
 VERIFY_VERSION = 1  # bump when a check changes, so stored reports are not reused
 # what `recover release` writes at the top of a release folder (build.py); anything else is
 # stray, e.g. a file dropped in by hand that SHA256SUMS and the manifest would not cover
-TOP_LEVEL_FILES = {MANIFEST_NAME, RELEASE_CARD, RELEASE_SUMS}
+TOP_LEVEL_FILES = {MANIFEST_NAME, RELEASE_CARD, RELEASE_SUMS, RELEASE_SPLIT}
 TOP_LEVEL_DIRS = {RELEASE_BUILD, "figures"}
 SCENE_DIR_PREFIX = SCENE_PREFIX
 
@@ -201,7 +202,28 @@ def verify_release(directory: Path, cfg: ReleaseConfig | None = None, executor: 
     stray = sorted(str(p.relative_to(directory)) for d in directory.glob(f"{SCENE_DIR_PREFIX}*")
                    for p in d.rglob("*") if p.is_file())
     set_problems = [f"{directory / rel}: scene file not listed in the manifest" for rel in stray if rel not in listed]
-    return reports, set_problems + top_level_problems(directory)
+    return reports, set_problems + split_problems(directory, rows) + top_level_problems(directory)
+
+
+def split_problems(directory: Path, rows: list) -> list[str]:
+    """The train/eval split is one side per scene and is what `split.json`'s seed and share
+    draw (`pipeline.release.split`); a release built before the split has neither."""
+    import json
+
+    from pydantic import ValidationError
+
+    from pipeline.release.split import SplitInfo, check
+
+    path = ReleaseLayout(directory).split
+    if not path.is_file():
+        with_split = sum(r.split is not None for r in rows)
+        return [f"{path}: missing, but {with_split} scene(s) in {directory / MANIFEST_NAME} have a split"] \
+            if with_split else []
+    try:
+        recorded = SplitInfo.model_validate(json.loads(path.read_text()))
+    except (ValueError, ValidationError) as e:
+        return [f"{path}: not a split record: {e}"]
+    return check(rows, recorded, f"{directory / MANIFEST_NAME} / {path.name}")
 
 
 def top_level_problems(directory: Path) -> list[str]:

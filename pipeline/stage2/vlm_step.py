@@ -15,12 +15,15 @@ configured executor, before the episodes' own stage: every episode in one shard,
 client (its `max_in_flight`) or one loaded model serves them all, asked `BATCH` at a time
 so a crash loses at most one batch. The runner writes each episode's marker
 (`stage2/vlm/_done/<unit>.done`) after its answer, with the episode's stage-1 inputs
-(`layout.fingerprint`): an episode answered for its current files is not asked again.
+(`layout.fingerprint`) and the localizer (`registry.describe`: backend, model, prompt
+version and the prompt files' digest): an episode answered for its current files by the
+same model and prompt is not asked again.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 
 from rich.console import Console
@@ -62,7 +65,14 @@ class VLMStep(Stage[EpisodeRecord]):
     def fingerprint(self, rec: EpisodeRecord) -> dict[str, str]:
         from pipeline.stage2.layout import fingerprint
 
-        return fingerprint(RunLayout.of(self.cfg).stage1.root, rec)
+        # the localizer too: another model or prompt (version or text) asks again
+        return {**fingerprint(RunLayout.of(self.cfg).stage1.root, rec), "localizer": self.localizer_id}
+
+    @cached_property
+    def localizer_id(self) -> str:
+        from pipeline.labelers.registry import describe
+
+        return describe(self.cfg.stage2.vlm)
 
     def forget(self, rec: EpisodeRecord) -> None:
         self.paths.abs(self.paths.vlm(rec)).unlink(missing_ok=True)  # an answer about the old video

@@ -198,11 +198,9 @@ def _faults(stage: Stage3, units: list[Unit]) -> list[QuarantineEntry]:
 
 
 def _describe(cfg: Config) -> str:
-    v = cfg.stage3.vlm
-    if v.backend == "simstate":
-        return "simstate"
-    model = v.openai.model if v.backend == "openai" else str(v.transformers.model_path)
-    return f"{v.backend}:{model}:{v.prompt_version}:{v.language}"
+    from pipeline.labelers.registry import describe
+
+    return describe(cfg.stage3.vlm)
 
 
 def _signature(cfg: Config) -> str:

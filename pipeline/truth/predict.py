@@ -15,8 +15,8 @@ Every localizer and characterizer is the one stages 2 and 3 use, built by
   with its quarantine reason.
 A unit's `Prediction` is its done marker's info (`<bench folder>/_done/<unit>.done`), recorded
 with what it was computed from: the episode's stage-1 files (`stage2.layout.fingerprint`),
-the stored evidence's size + mtime, the stage-2 config and a hash of the labelers' source
-code, so a rerun after a change of rules, thresholds or prompts predicts again and an
+the stored evidence's size + mtime, the stage-2 config, the VLM's prompt files' digest
+(`registry.describe`) and a hash of the labelers' source code, so a rerun after a change of rules, thresholds or prompts predicts again and an
 unchanged episode is not asked twice. Unusable evidence (a missing or truncated file) is a
 miss with the reason; anything else that fails one episode sets it aside with the reason.
 """
@@ -26,6 +26,7 @@ from __future__ import annotations
 import hashlib
 import json
 from dataclasses import asdict, dataclass, field
+from functools import cached_property
 from pathlib import Path
 
 from pipeline.config import Config
@@ -132,6 +133,14 @@ class BenchStage(Stage[EpisodeRecord]):
     def units(self, cfg: Config | None = None) -> list[EpisodeRecord]:
         return self.records
 
+    @cached_property
+    def prompts(self) -> str:
+        """The VLM's model, prompt version and prompt files' digest (an edited prompt file
+        predicts again); simstate asks no prompt."""
+        from pipeline.labelers.registry import describe
+
+        return describe(self.cfg.stage2.vlm.model_copy(update={"backend": self.localizer}))
+
     def unit_id(self, rec: EpisodeRecord) -> str:
         from pipeline.stage2.layout import unit_id
 
@@ -143,7 +152,7 @@ class BenchStage(Stage[EpisodeRecord]):
 
         layout = RunLayout.of(self.cfg)
         stored = layout.stage2.abs(layout.stage2.evidence(rec))
-        config = json.dumps([self.localizer, self.cfg.stage2.model_dump(mode="json")], sort_keys=True)
+        config = json.dumps([self.localizer, self.cfg.stage2.model_dump(mode="json"), self.prompts], sort_keys=True)
         return {"episode": fingerprint(layout.stage1.root, rec),
                 "evidence": file_stamp(stored) if not self.vlm and stored.is_file() else None,
                 "config": hashlib.sha256(config.encode()).hexdigest()[:16], "code": self.code}

@@ -53,6 +53,18 @@ def test_an_rd_rerun_starts_from_the_rollout_state_unperturbed(scene_env, scene,
 
 
 @pytest.mark.sim
+def test_an_official_trial_starts_from_libero_init_state_number_trial_unperturbed(scene_env, scene, monkeypatch):
+    starts = []
+    reset_to = scene_env.reset_to
+    monkeypatch.setattr(scene_env, "reset_to", lambda state: (starts.append(np.array(state)), reset_to(state))[1])
+    t = _trial(scene, mode="official", trial=1, horizon=3)
+    ep = run_trial(scene_env, HoldPolicy(), t)
+    np.testing.assert_array_equal(starts[-1], scene_env.task.init_states()[1])
+    assert (ep.mode.value, ep.offsets, ep.episode_id, ep.level, ep.scene_step) == ("official", {}, "official-i01", None, 0)
+    assert "__official__" in t.unit_id
+
+
+@pytest.mark.sim
 def test_a_state_of_the_wrong_length_is_an_episode_error_naming_the_file(scene_env, scene, tmp_path):
     bad = tmp_path / "step_0001_sim_state.npy"
     np.save(bad, np.zeros(10))

@@ -62,3 +62,15 @@ def test_the_summary_puts_the_recovery_expert_as_a_reference_row_beside_the_plai
     assert "| `scripted` | scripted expert (reference) | 25.0 (4) | — | — | — | 25.0 (4) |" in md
     assert "| `recovery` | recovery expert (reference) | — | — | 75.0 (4) | — | 75.0 (4) |" in md
     assert "| `pi0` | openpi | 0.0 (1) |" in md
+
+
+def test_official_init_state_trials_are_libero_success_beside_rsr_and_stay_out_of_the_rsr_tables(tmp_path):
+    rows = [row(True, level="L1"), row(False, level="L2")]
+    rows += [row(w, mode="official", level=None) for w in (True, True, True, False)]
+    data = write_report(rows, EvalConfig(), tmp_path)
+    res = data["policies"]["scripted"]
+    assert res["libero_success"] == {"libero_spatial": 0.75, "all": 0.75} and res["rsr"] == 0.5
+    md = (tmp_path / "report.md").read_text()
+    assert "unlabeled" not in md  # official trials have no level: no column for them
+    assert "| `scripted` | libero_spatial | 75.0 (4) | 50.0 (2) |" in md
+    assert (tmp_path / "libero_vs_rsr.png").read_bytes()[:4] == b"\x89PNG"

@@ -22,7 +22,8 @@ def _config(tmp_path: Path, fixture_run, **eval_overrides) -> Path:
         # the plain expert only (the default adds the recovery expert: see the reference test)
         "eval": {"policies": [{"kind": "scripted"}],
                  "scenes_dir": str(fixture_run.scenes), "stage1_dir": str(fixture_run.stage1),
-                 "trials_per_condition": 2, "horizon": 6, "gripper_settle_steps": 20} | eval_overrides,
+                 "trials_per_condition": 2, "horizon": 6, "gripper_settle_steps": 20,
+                 "official_trials": 0} | eval_overrides,
     }
     path = tmp_path / "eval.yaml"
     path.write_text(yaml.safe_dump(raw))
@@ -44,7 +45,7 @@ def hold_policies(monkeypatch):
 
 @pytest.mark.sim
 def test_eval_writes_records_and_report_and_a_rerun_redoes_only_missing_trials(tmp_path, fixture_run, hold_policies):
-    cfg = load_config(_config(tmp_path, fixture_run))
+    cfg = load_config(_config(tmp_path, fixture_run, official_trials=2))
     out = eval_run.run(cfg)
     rows = read_episodes(out / "episodes.parquet")
     scene_rows = [r for r in rows if r.mode == "scene"]
@@ -60,7 +61,12 @@ def test_eval_writes_records_and_report_and_a_rerun_redoes_only_missing_trials(t
     assert metrics["policies"]["scripted"]["rsr"] == 0.0
     assert metrics["policies"]["scripted"]["rsr_suite_level"]["libero_spatial"]["unlabeled"] == 0.0
     assert "| libero_spatial | — | — | — | — | 0.0 (4) | 0.0 (4) |" in (out / "report.md").read_text()
-    assert len(list((out / "_done").glob("*.done"))) == 9
+    official = sorted(r.episode_id for r in rows if r.mode == "official")
+    assert official == ["official-i00", "official-i01"]  # eval.official_trials (2) for the one task
+    assert metrics["policies"]["scripted"]["libero_success"]["libero_spatial"] == 0.0
+    assert "| `scripted` | libero_spatial | 0.0 (2) | 0.0 (4) |" in (out / "report.md").read_text()
+    assert (out / "libero_vs_rsr.png").is_file()
+    assert len(list((out / "_done").glob("*.done"))) == 11
 
     acted = sum(len(p.contexts) for p in hold_policies)
     before = pq.read_table(out / "episodes.parquet").drop(["wall_time_s"])

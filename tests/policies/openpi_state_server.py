@@ -1,6 +1,6 @@
 """A real openpi policy server (PyPI `openpi-server`) for tests: serves a proportional
 controller on `observation/state` (the server cannot see the simulator) and logs a digest
-of every observation it receives, one JSON line each.
+of every observation it receives (the temporal-context keys too), one JSON line each.
 
     python openpi_state_server.py --port 8123 --log /tmp/requests.jsonl
 """
@@ -33,6 +33,12 @@ class StateController(BasePolicy):
         for key in ("observation/image", "observation/wrist_image"):
             img = obs[key]
             entry[key] = {"shape": list(img.shape), "dtype": str(img.dtype), "sha": digest(img)}
+        # the temporal context (initial frame or history), as it arrived
+        for key in sorted(k for k in obs if k.startswith(("observation/initial_", "observation/history_"))):
+            a = np.asarray(obs[key])
+            entry[key] = {"shape": list(a.shape), "dtype": str(a.dtype), "sha": digest(a)}
+        if "observation/temporal_context" in obs:
+            entry["temporal_context"] = str(obs["observation/temporal_context"])
         with open(self.log, "a") as f:
             f.write(json.dumps(entry) + "\n")
         actions = np.zeros((CHUNK, 7), dtype=np.float32)

@@ -164,3 +164,57 @@ def libero_spatial_env():
     env = SimEnv(tasks(["libero_spatial"])[0])
     yield env
     env.close()
+
+
+@pytest.mark.sim
+def test_temporal_context_arrives_frame_exact_at_a_real_openpi_server(server, libero_spatial_env, tmp_path):
+    """Both of the reference's temporal variants, built by the eval's own `temporal_context`
+    and sent by the shipped client: the server logs what arrived, compared with frames
+    rendered here independently from the same states."""
+    from types import SimpleNamespace
+
+    from pipeline.eval.protocol import temporal_context
+
+    port, log = server
+    env = libero_spatial_env
+    env.reset_to_init(0)
+    states, rows = [], {"eef_pos": [], "eef_quat": [], "gripper_qpos": []}
+    for t in range(10):  # a short "pre-failure" window: the arm rises
+        states.append(env.get_state())
+        obs = observe(env, SimpleNamespace(cameras=(), image_size=224), t)
+        rows["eef_pos"].append(obs.eef_pos)
+        rows["eef_quat"].append(obs.eef_quat)
+        rows["gripper_qpos"].append(obs.gripper_qpos)
+        env.step(np.array([0, 0, 0.5, 0, 0, 0, -1.0]))
+    history = tmp_path / "step_0010_history.npz"
+    np.savez(history, steps=np.arange(10, dtype=np.int32), sim_states=np.asarray(states),
+             **{k: np.asarray(v, dtype=np.float32) for k, v in rows.items()})
+    scene = SimpleNamespace(init_state=0, episode_id="scripted-i00-s0", history_paths=(history,))
+    policy = OpenpiPolicy(OpenpiPolicyConfig(port=port, image_size=224), name="pi-context")
+    cfg = policy.cfg
+    try:
+        for kind in ("initial_frame", "history"):
+            trial = SimpleNamespace(temporal_context=kind, mode="scene", scene=scene)
+            context = temporal_context(env, policy, trial)
+            env.reset_to(states[-1])
+            policy.reset(env.task, 0)
+            before = len(_requests(log))
+            policy.act(observe(env, policy, 0, context))
+            (got,) = _requests(log)[before:]
+            assert got["temporal_context"] == kind
+            if kind == "initial_frame":
+                env.reset_to(env.task.init_states()[0])
+                for cam, key in (("agentview", "image"), ("robot0_eye_in_hand", "wrist_image")):
+                    want = prepare_image(env.render(cam, 256), 224, cfg.rotate_180)
+                    assert got[f"observation/initial_{key}"] == {"shape": [224, 224, 3], "dtype": "uint8",
+                                                                 "sha": digest(want)}
+            else:
+                frames = env.render_states(np.asarray(states[-8:]), ["agentview", "robot0_eye_in_hand"], 256)
+                for cam, key in (("agentview", "image"), ("robot0_eye_in_hand", "wrist_image")):
+                    want = np.stack([prepare_image(f, 224, cfg.rotate_180) for f in frames[cam]])
+                    assert got[f"observation/history_{key}"]["shape"] == [8, 224, 224, 3]
+                    assert got[f"observation/history_{key}"]["sha"] == digest(want)  # the 8 frames, exact
+                assert got["observation/history_steps"]["sha"] == digest(np.arange(2, 10, dtype=np.int32))
+                assert got["observation/history_state"]["shape"] == [8, 8]
+    finally:
+        policy.close()

@@ -106,6 +106,8 @@ SCENARIO_SCHEMA = pa.schema(
         # added by the recovery-expert certificates (why a scene is not certified); the one
         # column not in the hand-written schema, declared nullable so older manifests still read
         pa.field("certify_reason", pa.string()),
+        pa.field("split", pa.string()),  # issue 24: train / eval
+        pa.field("generator", pa.string()),  # issue 24: kind:name@params hash of the source episode
     ],
     metadata={"schema_version": str(SCHEMA_VERSION), "name": "libero-recover scenarios"},
 )
@@ -221,7 +223,11 @@ LOCALIZATION_SCHEMA = pa.schema(
 # a LeRobot data file, as pyarrow inferred it from the frame arrays; since issue 30 also the
 # actions as stepped (float64), beside the float32 `action`
 LEROBOT_FRAME_SCHEMA = pa.schema([
-    pa.field("observation.state", pa.list_(pa.float32(), 8)), pa.field("action", pa.list_(pa.float32(), 7)),
+    pa.field("observation.state", pa.list_(pa.float32(), 8)),
+    # issue 24: the arm's joint states beside the end-effector state
+    pa.field("observation.states.joint_state", pa.list_(pa.float32(), 7)),
+    pa.field("observation.states.gripper_state", pa.list_(pa.float32(), 2)),
+    pa.field("action", pa.list_(pa.float32(), 7)),
     pa.field("action_float64", pa.list_(pa.float64(), 7)),
     pa.field("timestamp", pa.float32()), pa.field("frame_index", pa.int64()), pa.field("episode_index", pa.int64()),
     pa.field("index", pa.int64()), pa.field("task_index", pa.int64()),

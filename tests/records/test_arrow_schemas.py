@@ -137,7 +137,7 @@ def test_each_writer_puts_its_declared_schema_on_disk(tmp_path):
                      init_eef_drift_m=0.0, init_gripper_opening=0.08, steps=2, success=True, wall_time_s=0.1,
                      actions=[[0.0] * 7] * 2, eef_pos=[[0.0] * 3] * 3)
     _same(_written(tmp_path, "trials.parquet", lambda p: write_episodes(p, [ep])), EVAL_SCHEMA)
-    lr = lerobot_format.frame_table(np.zeros((3, 8)), np.zeros((3, 7)), 0, 0, 0)
+    lr = lerobot_format.frame_table(np.zeros((3, 8)), np.zeros((3, 7)), 0, 0, 0, np.zeros((3, 7)))
     _same(_written(tmp_path, "lerobot.parquet", lambda p: pq.write_table(lr, p)), lerobot_format.FRAME_SCHEMA)
     s2 = tmp_path / "stage2"
     for i, loc in enumerate([_localization(0), _localization(1, model=None, events=[])]):

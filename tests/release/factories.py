@@ -87,8 +87,10 @@ def annotation(suite: str, task: str, ep_id: str, instruction: str, fail_step: i
     ).model_dump(mode="json")
 
 
-def make_run(root: Path, src: SceneSource, scenes: dict[str, tuple[bytes, str]]) -> Path:
-    """A run folder with one failed episode per entry: episode id -> (npy bytes, BDDL text)."""
+def make_run(root: Path, src: SceneSource, scenes: dict[str, tuple[bytes, str]], policy: str = "scripted",
+             policy_params: dict | None = None) -> Path:
+    """A run folder with one failed episode per entry: episode id -> (npy bytes, BDDL text),
+    all by one generator (`policy`, `policy_params`)."""
     import pyarrow.parquet as pq
 
     t = src.task
@@ -102,7 +104,7 @@ def make_run(root: Path, src: SceneSource, scenes: dict[str, tuple[bytes, str]])
         write_with(folder / "actions.npy", lambda p: np.save(p, src.actions))
         records.append(EpisodeRecord(
             suite=t.suite, task=t.name, task_index=t.index, instruction=t.instruction, episode_id=ep_id,
-            init_state=0, policy="scripted", policy_kind="scripted", seed=i, chunk_size=8, horizon=24,
+            init_state=0, policy=policy, policy_kind="scripted", policy_params=policy_params or {}, seed=i, chunk_size=8, horizon=24,
             settle_steps=10, steps=step, success=False, wall_time_s=1.0, state_dim=src.states.shape[1],
             path=f"episodes/{ep_dir.as_posix()}"))
         scene = Path(f"selected_bddl_scenes_{t.suite}") / t.name / f"episode_{ep_id}"

@@ -72,6 +72,9 @@ def frame_summary(item: dict, image_keys: list[str]) -> dict:
     out = {"index": int(item["index"]), "episode_index": int(item["episode_index"]),
            "frame_index": int(item["frame_index"]), "timestamp": float(item["timestamp"]),
            "task": item["task"], "state": item["observation.state"].tolist(), "action": item["action"].tolist()}
+    for key in ("observation.states.joint_state", "observation.states.gripper_state"):
+        if key in item:  # the arm's joint states, as LeRobot reads them
+            out[key] = item[key].tolist()
     for key in image_keys:
         img = item[key]  # float in [0, 1], channels first
         out[key] = {"shape": list(img.shape), "dtype": str(img.dtype), "mean": float(img.mean()),

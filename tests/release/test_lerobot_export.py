@@ -46,7 +46,12 @@ def test_export_writes_the_v21_layout(exported):
     assert info["codebase_version"] == "v2.1" and info["fps"] == 20
     assert (info["total_episodes"], info["total_frames"], info["total_videos"]) == (2, 48, 4)
     assert info["features"]["observation.state"]["shape"] == [8]
+    assert info["features"]["observation.states.joint_state"] == {
+        "dtype": "float32", "shape": [7], "names": [f"joint_{i}" for i in range(7)]}
+    assert info["features"]["observation.states.gripper_state"]["shape"] == [2]
     assert info["features"]["action"]["shape"] == [7]
+    # two scenes of one suite x level: at least one is held out, and its rollout with it
+    assert info["splits"].get("eval", "").endswith(":2") and info["splits"].get("train", "0:0").startswith("0:")
     for ep in (0, 1):
         assert (root / f"data/chunk-000/episode_{ep:06d}.parquet").is_file()
         for key in ("observation.images.image", "observation.images.wrist_image"):
@@ -78,6 +83,12 @@ def test_export_frames_follow_the_logged_states_and_actions(exported):
     assert np.allclose(state[:, :3], eef, atol=1e-3)
     assert np.array_equal(state[0, :3].round(6), eef[0].round(6))
     assert state[8, 2] > state[0, 2] + 0.05  # the arm went up
+    # the arm's joint states, from the logged MuJoCo states (qpos: the 7 arm joints, then the fingers)
+    joints = np.array(table.column("observation.states.joint_state").to_pylist())
+    assert np.allclose(joints, src.states[:24, 1:8], atol=1e-6)
+    assert not np.allclose(joints[0], joints[8], atol=1e-3)  # they moved as the arm went up
+    fingers = np.array(table.column("observation.states.gripper_state").to_pylist())
+    assert np.array_equal(fingers, state[:, 6:8]) and np.allclose(fingers, src.states[:24, 8:10], atol=1e-6)
     with av.open(str(out / "rollouts/videos/chunk-000/observation.images.image/episode_000001.mp4")) as c:
         s = c.streams.video[0]
         frames = list(c.decode(s))
@@ -125,6 +136,8 @@ def test_lerobots_own_dataset_class_opens_the_export(exported, tmp_path):
         "v3.0", 48, 48, 2, 20)
     assert got["episode_lengths"] == [24, 24] and got["tasks"] == [src.task.instruction]
     assert got["features"]["observation.state"] == {"dtype": "float32", "shape": [8]}
+    assert got["features"]["observation.states.joint_state"] == {"dtype": "float32", "shape": [7]}
+    assert got["features"]["observation.states.gripper_state"] == {"dtype": "float32", "shape": [2]}
     assert got["features"]["action"] == {"dtype": "float32", "shape": [7]}
     assert got["features"]["action_float64"] == {"dtype": "float64", "shape": [7]}
     cams = ["observation.images.image", "observation.images.wrist_image"]
@@ -134,6 +147,8 @@ def test_lerobots_own_dataset_class_opens_the_export(exported, tmp_path):
     assert (mid["index"], mid["episode_index"], mid["frame_index"]) == (30, 1, 6)
     assert mid["timestamp"] == pytest.approx(6 / 20) and mid["task"] == src.task.instruction
     assert np.allclose(mid["state"], table.column("observation.state")[6].as_py(), atol=1e-6)
+    assert np.allclose(mid["observation.states.joint_state"],
+                       table.column("observation.states.joint_state")[6].as_py(), atol=1e-6)
     assert np.allclose(mid["action"], table.column("action")[6].as_py(), atol=1e-6)
     for key in cams:
         for frame in (first, mid):

@@ -99,6 +99,7 @@ def test_agreement_report_compares_vlm_and_simstate_onsets(tmp_path):
 def test_a_vlm_backend_localizes_over_loopback_and_simstate_runs_beside_it(stage1_run, episodes, tmp_path):
     import shutil
 
+    from pipeline.stage2.vlm_step import run_vlm
     from tests.labelers.vlm.loopback_server import LoopbackServer
 
     run_dir = tmp_path / "run"
@@ -109,6 +110,11 @@ def test_a_vlm_backend_localizes_over_loopback_and_simstate_runs_beside_it(stage
             "stage2": {"history_frames": 0, "vlm": {"backend": "openai", "language": "en",
                        "openai": {"base_url": srv.base_url, "model": "ok", "max_retries": 0}}}})
         summary = run(cfg)
+        # the answers' markers record the localizer: another prompt version asks again
+        failed = [r for r in episodes.values() if not r.success]
+        v1 = cfg.model_copy(update={"stage2": cfg.stage2.model_copy(
+            update={"vlm": cfg.stage2.vlm.model_copy(update={"prompt_version": "v1"})})})
+        assert (run_vlm(cfg, failed), run_vlm(v1, failed)) == (0, len(failed))
     drop = Localization.model_validate_json(_outputs(run_dir, "localizations")[episodes["drop"].episode_id].read_text())
     assert (drop.source, drop.model, drop.fail_time_s, drop.fail_step) == ("openai", "ok", 2.0, 40)
     assert drop.raw_text and drop.prompt_hash and drop.simstate_time_s == pytest.approx(5.5, abs=0.5)

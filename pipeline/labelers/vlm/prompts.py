@@ -1,7 +1,12 @@
 """Versioned prompt files, loaded by task + language, hashed, and filled in.
 
-Input: `prompts/<task>.<version>.<language>.md` (UTF-8), e.g. `localize.v1.zh.md`, with
-`{{placeholder}}` fields (`instruction`, `duration`, and for characterization `fail_time`).
+Input: `prompts/<task>.<version>.<language>.md` (UTF-8), e.g. `localize.v2.zh.md`, with
+`{{placeholder}}` fields (`instruction`, `duration`, and for v1's characterization `fail_time`).
+Versions: `v1` (the answer may follow step-by-step reasoning; characterization is told the
+onset) and `v2`, the default (the reference's requirements: the answer is the JSON object
+only, reasoning belongs before it or in the model's reasoning channel; characterization is
+not told the onset and covers the gripper's state and the order of execution). Both give
+the same JSON keys, so one parser reads either.
 Output: a `Prompt` whose `name` ("localize.v1.zh") and `sha256` (of the file's bytes) are
 recorded with every annotation it produces, and whose `render(**fields)` fills every field.
 
@@ -23,7 +28,7 @@ from pipeline.errors import ConfigError
 PROMPTS_DIR = Path(__file__).resolve().parents[3] / "prompts"
 TASKS = ("localize", "characterize")
 LANGUAGES = ("zh", "en")
-DEFAULT_VERSION = "v1"
+DEFAULT_VERSION = "v2"
 _FIELD = re.compile(r"\{\{\s*([a-z_]+)\s*\}\}")
 
 
@@ -96,3 +101,11 @@ def prompt_text(prompt: Prompt, instruction: str, duration_s: float, fail_time_s
             raise ValueError(f"prompt {prompt.name} needs the failure time")
         values["fail_time"] = format_seconds(fail_time_s)
     return prompt.render(**values)
+
+
+def prompts_digest(language: str = "zh", version: str = DEFAULT_VERSION, directory: str | Path | None = None) -> str:
+    """Short id of the exact prompt texts a run sends (both tasks' names and SHA-256): part of
+    every fingerprint that must redo model answers when the prompt changes."""
+    prompts = load_prompts(language, version, directory)
+    blob = "\n".join(f"{p.name}:{p.sha256}" for _, p in sorted(prompts.items()))
+    return hashlib.sha256(blob.encode()).hexdigest()[:16]

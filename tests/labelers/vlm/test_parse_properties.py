@@ -11,6 +11,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from pipeline.labelers.vlm.parse import parse_characterization, parse_localization
+from pipeline.records import Category, Level
 from pipeline.labelers.vlm.schemas import CharacterizationAnswer, LocalizationAnswer, Quarantine
 
 SETTINGS = settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
@@ -85,3 +86,33 @@ def test_mutated_answers_give_a_time_inside_the_video_or_a_quarantine(raw: str, 
 @given(raw=st.one_of(st.text(max_size=400), _mutated_answer()))
 def test_characterization_never_raises(raw: str):
     assert isinstance(parse_characterization(raw), CharacterizationAnswer | Quarantine)
+
+
+_reasoning = st.text(st.characters(blacklist_characters="{}<>", blacklist_categories=("Cs",)), max_size=80)
+_characterization = st.builds(
+    CharacterizationAnswer,
+    recovery_level=st.sampled_from(list(Level)),
+    failure_category=st.sampled_from(list(Category)),
+    recovery_action=st.text(st.characters(blacklist_categories=("Cs", "Cc", "Zs", "Zl", "Zp")), min_size=1, max_size=40),
+)
+
+
+@st.composite
+def _answer_as_a_version_writes_it(draw, obj: dict) -> str:
+    """v2 prompts ask for the JSON object only (reasoning, if any, in the model's reasoning
+    channel, which reaches us as a closed think block); v1 let prose precede the JSON."""
+    answer = json.dumps(obj, ensure_ascii=draw(st.booleans()))
+    if draw(st.sampled_from(["v1", "v2"])) == "v1":
+        return draw(_reasoning) + "\n" + answer
+    return (f"<think>{draw(_reasoning)}</think>" if draw(st.booleans()) else "") + answer
+
+
+@SETTINGS
+@given(data=st.data(), tenths=st.integers(0, 1200), extra=st.integers(0, 50))
+def test_a_valid_answer_of_either_prompt_version_parses_to_itself(data, tenths: int, extra: int):
+    duration = (tenths + extra) / 10
+    raw = data.draw(_answer_as_a_version_writes_it({"fail": tenths / 10}))
+    assert parse_localization(raw, duration) == LocalizationAnswer(fail=tenths / 10)
+    char = data.draw(_characterization)
+    raw = data.draw(_answer_as_a_version_writes_it(char.model_dump(mode="json")))
+    assert parse_characterization(raw) == char

@@ -19,9 +19,9 @@ from tests.labelers.vlm.factories import frame_value
 INSTRUCTION = "put the black bowl on the plate"
 
 
-def _backend(server, scenario="ok", sampling=None, language="en", **cfg) -> OpenAIBackend:
+def _backend(server, scenario="ok", sampling=None, language="en", version="v2", **cfg) -> OpenAIBackend:
     cfg = {"base_url": server.base_url, "model": scenario, "backoff_base_s": 0.01, "backoff_max_s": 0.05, **cfg}
-    return OpenAIBackend(OpenAIBackendConfig(**cfg), sampling or SamplingConfig(fps=2.0), load_prompts(language))
+    return OpenAIBackend(OpenAIBackendConfig(**cfg), sampling or SamplingConfig(fps=2.0), load_prompts(language, version))
 
 
 def test_frames_mode_sends_sampled_frames_with_true_fps_and_indices(server, video_4s_20hz):
@@ -41,7 +41,7 @@ def test_frames_mode_sends_sampled_frames_with_true_fps_and_indices(server, vide
     assert result.error is None and result.finish_reason == "stop"
     assert result.content == '{"fail": 2.0}' and "gripper closes" in result.reasoning
     assert result.prompt_tokens == 1234 and result.completion_tokens == 56 and result.latency_s > 0
-    assert result.prompt_name == "localize.v1.en" and len(result.prompt_hash) == 64
+    assert result.prompt_name == "localize.v2.en" and len(result.prompt_hash) == 64
     assert parse_localization(result, result.video.duration_s) == LocalizationAnswer(fail=2.0)
 
 
@@ -147,7 +147,8 @@ def test_a_rate_the_server_would_misread_is_refused_before_sending(server, video
     assert result.error.startswith("sampling_rate_mismatch") and server.calls["ok"] == 0
 
 
-def test_characterize_sends_the_failure_time_and_parses_the_answer(video_4s_20hz):
+@pytest.mark.parametrize("version", ["v1", "v2"])
+def test_characterize_sends_the_failure_time_only_in_v1_and_parses_the_answer(video_4s_20hz, version):
     from tests.labelers.vlm.loopback_server import LoopbackServer
 
     answer = (
@@ -155,8 +156,8 @@ def test_characterize_sends_the_failure_time_and_parses_the_answer(video_4s_20hz
     )
     path, table = video_4s_20hz
     with LoopbackServer(answer=answer) as srv:
-        result = _backend(srv, language="zh").characterize(path, INSTRUCTION, 2.5, table)
-        assert "2.5 秒" in srv.seen[0].text and INSTRUCTION in srv.seen[0].text
-    assert result.prompt_name == "characterize.v1.zh"
+        result = _backend(srv, language="zh", version=version).characterize(path, INSTRUCTION, 2.5, table)
+        assert ("2.5 秒" in srv.seen[0].text) == (version == "v1") and INSTRUCTION in srv.seen[0].text
+    assert result.prompt_name == f"characterize.{version}.zh"
     parsed = parse_characterization(result)
     assert parsed.recovery_level.value == "L3" and parsed.recovery_action == "Stand the bowl up."

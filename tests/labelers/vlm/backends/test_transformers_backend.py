@@ -148,7 +148,7 @@ def test_characterization_runs_the_zh_prompt_and_parses(tiny, video_4s_20hz):
     video, table = video_4s_20hz
     answer = '{"recovery_level": "L1", "failure_category": "grasp_failure", "recovery_action": "Grasp the bowl again."}'
     result = _backend(path, answer, max_new_tokens=200, language="zh").characterize(video, INSTRUCTION, 1.5, table)
-    assert result.prompt_name == "characterize.v1.zh"
+    assert result.prompt_name == "characterize.v2.zh"
     parsed = parse_characterization(result)
     assert parsed.failure_category.value == "grasp_failure" and parsed.recovery_action == "Grasp the bowl again."
 
