@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 from rich.console import Console
+from rich.markup import escape
 
 from pipeline.config import Config
 from pipeline.layout import RunLayout
@@ -221,10 +222,11 @@ def run(cfg: Config, path: Path, console: Console | None = None) -> str:
         if step.gate is not None:
             waiting, what = step.gate(cfg)
             if waiting:
-                console.print(f"[bold yellow]stopped at human review[/bold yellow]: {waiting} {what} await review. "
-                              f"Review them (`{step.command} --config {path}`, the review page), then run "
-                              f"`recover run --config {path}` again to go on with "
-                              f"{', '.join(s.name for s in STEPS[STEPS.index(step) + 1:])}.")
+                # soft_wrap: the commands stay whole when copied from a narrow terminal or a log
+                console.print(f"[bold yellow]stopped at human review[/bold yellow]: {waiting} {escape(what)} await "
+                              f"review. Review them (`{step.command} --config {escape(str(path))}`, the review page), "
+                              f"then run `recover run --config {escape(str(path))}` again to go on with "
+                              f"{', '.join(s.name for s in STEPS[STEPS.index(step) + 1:])}.", soft_wrap=True)
                 return "review"
             console.print(f"[green]{step.name}[/green]: nothing awaits review")
             continue

@@ -78,7 +78,7 @@ def test_render_process_writes_the_same_bytes_as_rendering_in_the_worker(tmp_pat
     done = Completions(stage1)
     for u in units:
         ours = _files(stage1 / u.rel_dir)
-        assert set(ours) == {"states.npy", "steps.parquet", "frames.parquet", *(f"video_{c}.mp4" for c in CAMERAS)}
+        assert set(ours) == {"actions.npy", "states.npy", "steps.parquet", "frames.parquet", *(f"video_{c}.mp4" for c in CAMERAS)}
         theirs = _files(inline / u.rel_dir)
         assert ours == theirs
         assert done.is_done(u.unit_id)

@@ -102,7 +102,7 @@ def test_killed_run_resumes_to_a_complete_manifest_without_duplicates(tmp_path):
     for r in records:
         folder = stage1 / r.path
         names = sorted(p.name for p in folder.iterdir())
-        assert names == ["frames.parquet", "states.npy", "steps.parquet", "video_agentview.mp4"], names
+        assert names == ["actions.npy", "frames.parquet", "states.npy", "steps.parquet", "video_agentview.mp4"], names
         states = np.load(folder / "states.npy")
         assert states.shape == (r.steps + 1, r.state_dim)
         assert pq.read_table(folder / "steps.parquet").num_rows == r.steps
