@@ -199,9 +199,8 @@ def measure(label: str, code: Path, run: Path, tmp: Path, args, db_url: str, bui
 
 class _ProfiledServer:
     def __init__(self, code: Path, cfg: Path, out: Path):
-        import httpx
-
         sys.path.insert(0, str(REPO))
+        from benchmarks.review_load import wait_serving
         from pipeline.review.server import free_port
 
         self.port = free_port()
@@ -209,16 +208,7 @@ class _ProfiledServer:
         self.proc = subprocess.Popen([sys.executable, str(Path(__file__).resolve()), "_serve", "--code", str(code),
                                       "--config", str(cfg), "--port", str(self.port), "--out", str(out)],
                                      cwd=code, env={**os.environ, "PYTHONPATH": str(code)})
-        deadline = time.monotonic() + 300
-        while True:
-            try:
-                if httpx.get(self.url + "/", timeout=1).status_code == 200:
-                    return
-            except httpx.HTTPError:
-                pass
-            if self.proc.poll() is not None or time.monotonic() > deadline:
-                raise RuntimeError("profiled server did not start")
-            time.sleep(0.2)
+        wait_serving(self.url, self.proc, lambda: "profiled server did not start")
 
     def stop(self) -> None:
         import signal

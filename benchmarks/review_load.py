@@ -32,6 +32,7 @@ import sys
 import tempfile
 import threading
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import httpx
@@ -235,6 +236,21 @@ def missed(name: str, res: dict, aims: dict = AIMS) -> list[str]:
     return out
 
 
+def wait_serving(url: str, proc: subprocess.Popen, failure: Callable[[], str]) -> None:
+    """Return once the server at `url` answers its page; raise with `failure()` if its process
+    exits or 300 s pass (imports alone take a minute on a busy 2-core machine)."""
+    deadline = time.monotonic() + 300
+    while True:
+        try:
+            if httpx.get(url + "/", timeout=1).status_code == 200:
+                return
+        except httpx.HTTPError:
+            pass
+        if proc.poll() is not None or time.monotonic() > deadline:
+            raise RuntimeError(failure())
+        time.sleep(0.2)
+
+
 class Server:
     """`recover review serve` of checkout `code` on a config, as its own processes."""
 
@@ -247,16 +263,7 @@ class Server:
         self.proc = subprocess.Popen([sys.executable, "-c", "from pipeline.cli import app; app()", "review", "serve",
                                       "--config", str(cfg), "--port", str(self.port), "--workers", str(workers)],
                                      cwd=code, stdout=subprocess.DEVNULL, stderr=open(self.log, "wb"), env=env)
-        deadline = time.monotonic() + 300  # imports alone take a minute on a busy 2-core machine
-        while True:
-            try:
-                if httpx.get(self.url + "/", timeout=1).status_code == 200:
-                    break
-            except httpx.HTTPError:
-                pass
-            if self.proc.poll() is not None or time.monotonic() > deadline:
-                raise RuntimeError(f"server did not start: {self.log.read_text()[-2000:]}")
-            time.sleep(0.2)
+        wait_serving(self.url, self.proc, lambda: f"server did not start: {self.log.read_text()[-2000:]}")
 
     def stop(self) -> None:
         self.proc.terminate()
