@@ -10,7 +10,8 @@ Invariants (enforced by the database, not only by code):
 - one item per (episode key, revision) (`uq_item_key_revision`);
 - the audit log is append-only (triggers abort UPDATE and DELETE on `events`).
 SQLite runs in WAL mode with a busy timeout; its write transactions start with BEGIN
-IMMEDIATE (use `write_session`) so two writers queue instead of failing on a lock upgrade.
+IMMEDIATE (use `write_session`) so two writers queue instead of failing on a lock upgrade,
+and the writers of one process queue first on the engine's own lock (`_sqlite_setup`).
 PostgreSQL runs READ COMMITTED: the workflow takes the item's row lock (`FOR UPDATE`)
 before it checks and changes an item. Times are UNIX seconds (float).
 """
@@ -18,6 +19,8 @@ before it checks and changes an item. Times are UNIX seconds (float).
 from __future__ import annotations
 
 import os
+import sqlite3
+import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -197,6 +200,9 @@ def _private_files(path: Path) -> None:
             os.chmod(p, 0o600)
 
 
+_GATE_HELD = "review_write_gate"  # in a connection's info while it holds its engine's writer gate
+
+
 def _sqlite_setup(engine: Engine, busy_timeout_ms: int) -> None:
     @event.listens_for(engine, "connect")
     def _on_connect(dbapi_conn, _record):
@@ -209,13 +215,35 @@ def _sqlite_setup(engine: Engine, busy_timeout_ms: int) -> None:
         cur.execute("PRAGMA synchronous=NORMAL")
         cur.close()
 
+    # The writers of one process queue on this lock, not in SQLite's busy handler: that
+    # handler sleeps 1, 2, 5, ... up to 100 ms between tries, so under a steady stream of
+    # writers the sleeping, not the work, made the wait (decision p95 215 ms at 24
+    # decisions/s, `benchmarks/review_load.py`). Processes still queue in SQLite's lock.
+    gate = threading.Lock()
+
     @event.listens_for(engine, "begin")
     def _on_begin(conn):
         # a deferred reader that later writes can fail with SQLITE_BUSY at once (busy_timeout
         # does not apply to a stale WAL snapshot); writers therefore take the lock up front
         # (on the driver's connection: a statement through SQLAlchemy costs more than BEGIN does)
-        conn.connection.driver_connection.execute("BEGIN IMMEDIATE" if conn.get_execution_options().get("write")
-                                                  else "BEGIN")
+        driver = conn.connection.driver_connection
+        if not conn.get_execution_options().get("write"):
+            driver.execute("BEGIN")
+            return
+        if not gate.acquire(timeout=busy_timeout_ms / 1000):
+            raise sqlite3.OperationalError("database is locked (another writer of this process held it too long)")
+        try:
+            driver.execute("BEGIN IMMEDIATE")
+        except BaseException:
+            gate.release()
+            raise
+        conn.info[_GATE_HELD] = True
+
+    @event.listens_for(engine, "commit")
+    @event.listens_for(engine, "rollback")
+    def _on_end(conn):
+        if conn.info.pop(_GATE_HELD, False):
+            gate.release()
 
 
 @contextmanager

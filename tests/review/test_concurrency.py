@@ -114,3 +114,36 @@ def test_one_reviewer_sending_two_different_first_decisions_at_once_stores_one(e
         assert s.scalar(select(func.count(Review.id)).where(Review.item_id == items[0])) == 1
         assert s.scalar(select(Item.n_reviews).where(Item.id == items[0])) == 1
     assert outcomes.count("stored") == 1 and len(outcomes) == 8
+
+
+def test_the_writer_gate_is_freed_by_commit_rollback_and_a_failed_begin(tmp_path):
+    """SQLite writers of one process queue on the engine's gate (`db._sqlite_setup`); a write
+    that fails, or whose BEGIN IMMEDIATE fails, must not keep it (the next writer would wait
+    the whole busy timeout and fail)."""
+    import sqlite3
+    import time
+
+    import pytest
+    from sqlalchemy import text
+
+    from pipeline.review.db import make_engine, write_session
+
+    url = f"sqlite:///{tmp_path / 'review.sqlite'}"
+    engine = make_engine(url, busy_timeout_ms=300)
+    with pytest.raises(RuntimeError):
+        with write_session(engine) as s:
+            s.execute(text("SELECT 1"))
+            raise RuntimeError("a rule refused the write")
+    other = sqlite3.connect(tmp_path / "review.sqlite", isolation_level=None)
+    other.execute("BEGIN IMMEDIATE")  # another process holds SQLite's write lock
+    with pytest.raises(Exception, match="locked"):
+        with write_session(engine) as s:
+            s.execute(text("SELECT 1"))
+    other.execute("COMMIT")
+    t0 = time.perf_counter()
+    for _ in range(3):
+        with write_session(engine) as s:
+            s.execute(text("SELECT 1"))
+    assert time.perf_counter() - t0 < 0.25  # none waited out the 0.3 s gate timeout
+    other.close()
+    engine.dispose()
