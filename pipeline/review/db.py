@@ -245,6 +245,13 @@ def _sqlite_setup(engine: Engine, busy_timeout_ms: int) -> None:
         if conn.info.pop(_GATE_HELD, False):
             gate.release()
 
+    @event.listens_for(engine, "checkin")
+    @event.listens_for(engine, "invalidate")
+    def _on_return(_dbapi_conn, record, *_exc):
+        # a connection closed or invalidated mid-transaction (no commit or rollback event)
+        if record.info.pop(_GATE_HELD, False):
+            gate.release()
+
 
 @contextmanager
 def read_session(engine: Engine) -> Iterator[Session]:
