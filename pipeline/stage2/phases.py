@@ -8,7 +8,8 @@ the state rows 0..steps (so `post` ends at steps + 1 and includes the final stat
     post   [end, steps + 1)
 where `end` is the earlier of
   - scene stable again: the end of the first window of `settle_steps` steps, starting at or
-    after the onset, in which every object's speed stays below `settle_speed_mps`;
+    after the onset, in which every object's speed, and the gripper fingers' speed of
+    opening or closing, stay below `settle_speed_mps` (`motion`);
   - the robot stops the original attempt: the gripper command flips away from its value at
     the onset and holds the new value for `MIN_FLIP_STEPS` steps (a re-grasp, a release);
 and never before onset + 1, never after steps + 1.
@@ -27,9 +28,20 @@ from pipeline.records import Phases, step_at_time
 MIN_FLIP_STEPS = 3
 
 
+def motion(ev: Evidence) -> np.ndarray:
+    """Per state row, the fastest motion in the scene (m/s): every object's speed and the
+    gripper fingers' opening or closing. The fingers count because a restored scene cannot
+    say which way they were going: the MuJoCo state has no gripper command, so a restore
+    (`pipeline.sim.restore`) closes half-open fingers, which knocks an object beside them
+    when the robot was in fact opening them."""
+    objects = np.max(np.stack([ev.col("speed", o) for o in ev.objects]), axis=0) if ev.objects else np.zeros(len(ev))
+    opening = np.asarray(ev.gripper_opening, dtype=np.float64)
+    fingers = np.abs(np.diff(opening, prepend=opening[:1])) * ev.control_hz
+    return np.maximum(objects, fingers)
+
+
 def stable_end(ev: Evidence, onset: int, speed_mps: float, settle_steps: int) -> int | None:
-    speeds = np.max(np.stack([ev.col("speed", o) for o in ev.objects]), axis=0) if ev.objects else np.zeros(len(ev))
-    calm = speeds < speed_mps
+    calm = motion(ev) < speed_mps
     run = 0
     for t in range(onset, len(ev)):
         run = run + 1 if calm[t] else 0

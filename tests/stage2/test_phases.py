@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pyarrow as pa
 import pytest
 
@@ -60,3 +61,18 @@ def test_the_drop_phase_lasts_until_the_fallen_bowl_is_at_rest(evidences):
     assert lift[end - 1] < 0.02 < lift[onset]  # the fall is inside the during phase
     assert ev.col("speed", TARGET)[end - 10 : end].max() < 0.01
     assert p.post == (end, len(ev))
+
+
+def test_a_scene_is_not_settled_while_the_gripper_fingers_still_move():
+    """Objects at rest but the fingers half-way open: a restore would close them (the state has
+    no gripper command) and knock what stands beside them, so the scene waits for the fingers."""
+    from pipeline.stage2.phases import settled_step
+
+    ev = make_evidence(n=80)
+    ev.per_object["speed"]["cup_1"][20:25] = 0.5
+    ev.gripper_opening[:] = 0.0
+    ev.gripper_opening[30:40] = np.linspace(0.0, 0.08, 10)  # opening at 16 cm/s (0.8 cm a step)
+    ev.gripper_opening[40:] = 0.08
+    assert settled_step(ev, onset=20, speed_mps=0.01, settle_steps=10) == 40
+    ev.gripper_opening[30:] = 0.0  # fingers still: the objects alone decide
+    assert settled_step(ev, onset=20, speed_mps=0.01, settle_steps=10) == 25
