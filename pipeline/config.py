@@ -429,17 +429,7 @@ def _format_errors(path: Path, err: ValidationError) -> str:
 def load_config(path: str | Path, overrides: dict | None = None) -> Config:
     """Read and validate a YAML config; raise ConfigError naming the file and key."""
     path = Path(path)
-    try:
-        raw = yaml.safe_load(path.read_text())
-    except FileNotFoundError:
-        raise ConfigError(f"{path}: no such config file") from None
-    except yaml.YAMLError as e:
-        raise ConfigError(f"{path}: not valid YAML: {e}") from None
-    if raw is None or raw == {}:
-        # an empty file would otherwise mean "all defaults": the full 6,500-episode run
-        raise ConfigError(f"{path}: empty config; give at least one section (e.g. `run: {{name: my-run}}`)")
-    if not isinstance(raw, dict):
-        raise ConfigError(f"{path}: top level must be a mapping, got {type(raw).__name__}")
+    raw = _read_raw(path, ())
     for dotted, value in (overrides or {}).items():
         node = raw
         *parents, leaf = dotted.split(".")
@@ -452,6 +442,40 @@ def load_config(path: str | Path, overrides: dict | None = None) -> Config:
         raise ConfigError(_format_errors(path, e)) from None
     cfg._source = path
     return cfg
+
+
+def _read_raw(path: Path, seen: tuple[Path, ...]) -> dict:
+    """The YAML mapping of `path`; a top-level `extends: OTHER.yaml` (relative to this file)
+    is read first and this file's keys are merged over it, section by section, so a variant
+    (e.g. the report run) states only what differs from the config it varies."""
+    try:
+        raw = yaml.safe_load(path.read_text())
+    except FileNotFoundError:
+        where = f" (`extends` of {seen[-1]})" if seen else ""
+        raise ConfigError(f"{path}: no such config file{where}") from None
+    except yaml.YAMLError as e:
+        raise ConfigError(f"{path}: not valid YAML: {e}") from None
+    if raw is None or raw == {}:
+        # an empty file would otherwise mean "all defaults": the full 6,500-episode run
+        raise ConfigError(f"{path}: empty config; give at least one section (e.g. `run: {{name: my-run}}`)")
+    if not isinstance(raw, dict):
+        raise ConfigError(f"{path}: top level must be a mapping, got {type(raw).__name__}")
+    base = raw.pop("extends", None)
+    if base is None:
+        return raw
+    if not isinstance(base, str):
+        raise ConfigError(f"{path}: invalid configuration\n  extends: a config file's path, got {base!r}")
+    parent = (path.parent / base).resolve()
+    if parent in seen or parent == path.resolve():
+        raise ConfigError(f"{path}: invalid configuration\n  extends: {base} extends this file again (a cycle)")
+    return _merge(_read_raw(parent, (*seen, path.resolve())), raw)
+
+
+def _merge(base: dict, over: dict) -> dict:
+    out = dict(base)
+    for k, v in over.items():
+        out[k] = _merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
+    return out
 
 
 def save_resolved(cfg: Config, directory: str | Path, name: str = RESOLVED_CONFIG) -> Path:

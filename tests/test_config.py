@@ -132,3 +132,26 @@ def test_config_remembers_its_file_for_later_errors(tmp_path):
     p = _write(tmp_path, {"run": {"name": "x"}})
     err = load_config(p).error("tasks.tasks", "unknown task name(s) ['nope']")
     assert isinstance(err, ConfigError) and str(p) in str(err) and "tasks.tasks" in str(err)
+
+
+def test_the_report_config_is_the_default_on_init_states_nobody_tunes_on():
+    """`extends`: the report run states only what differs (README, "Tuning protocol")."""
+    default, report = load_config(ROOT / "configs/default.yaml"), load_config(ROOT / "configs/report.yaml")
+    assert report.tasks.init_states == [42, 43] and not set(report.tasks.init_states) & set(range(5))
+    assert report.tasks.suites == default.tasks.suites and report.tasks.max_tasks_per_suite is None  # all 130 tasks
+    assert report.stage1 == default.stage1 and report.release == default.release  # the noise is the default's
+    assert report.run.name == "report" and report.run.seed == default.run.seed
+
+
+def test_extends_merges_section_by_section_and_names_a_bad_base(tmp_path):
+    (tmp_path / "base.yaml").write_text(yaml.safe_dump({"run": {"name": "b", "seed": 4}, "stage1": {"rollout": {"horizon": 300}}}))
+    child = _write(tmp_path, {"extends": "base.yaml", "run": {"name": "c"}})
+    cfg = load_config(child)
+    assert (cfg.run.name, cfg.run.seed, cfg.stage1.rollout.horizon) == ("c", 4, 300)
+    _write(tmp_path, {"extends": "nowhere.yaml", "run": {"name": "c"}})
+    with pytest.raises(ConfigError, match=r"nowhere\.yaml: no such config file \(`extends` of .*cfg\.yaml\)"):
+        load_config(child)
+    (tmp_path / "base.yaml").write_text(yaml.safe_dump({"extends": "cfg.yaml", "run": {"name": "b"}}))
+    _write(tmp_path, {"extends": "base.yaml", "run": {"name": "c"}})
+    with pytest.raises(ConfigError, match="a cycle"):
+        load_config(child)
