@@ -8,8 +8,8 @@ the state rows 0..steps (so `post` ends at steps + 1 and includes the final stat
     post   [end, steps + 1)
 where `end` is the earlier of
   - scene stable again: the end of the first window of `settle_steps` steps, starting at or
-    after the onset, in which every object's speed, and the gripper fingers' speed of
-    opening or closing, stay below `settle_speed_mps` (`motion`);
+    after the onset, in which every object's speed, and the speed at which the gripper
+    fingers open, stay below `settle_speed_mps` (`motion`);
   - the robot stops the original attempt: the gripper command flips away from its value at
     the onset and holds the new value for `MIN_FLIP_STEPS` steps (a re-grasp, a release);
 and never before onset + 1, never after steps + 1.
@@ -30,13 +30,13 @@ MIN_FLIP_STEPS = 3
 
 def motion(ev: Evidence) -> np.ndarray:
     """Per state row, the fastest motion in the scene (m/s): every object's speed and the
-    gripper fingers' opening or closing. The fingers count because a restored scene cannot
-    say which way they were going: the MuJoCo state has no gripper command, so a restore
-    (`pipeline.sim.restore`) closes half-open fingers, which knocks an object beside them
-    when the robot was in fact opening them."""
+    speed at which the gripper fingers open. Opening fingers count because a restored scene
+    cannot say which way they were going: the MuJoCo state has no gripper command, and a
+    restore (`pipeline.sim.restore`, `hold_grasp`) closes half-open fingers, which knocks an
+    object beside them. Closing fingers do not count: the restore closes them too."""
     objects = np.max(np.stack([ev.col("speed", o) for o in ev.objects]), axis=0) if ev.objects else np.zeros(len(ev))
     opening = np.asarray(ev.gripper_opening, dtype=np.float64)
-    fingers = np.abs(np.diff(opening, prepend=opening[:1])) * ev.control_hz
+    fingers = np.maximum(np.diff(opening, prepend=opening[:1]), 0.0) * ev.control_hz
     return np.maximum(objects, fingers)
 
 

@@ -63,9 +63,9 @@ def test_the_drop_phase_lasts_until_the_fallen_bowl_is_at_rest(evidences):
     assert p.post == (end, len(ev))
 
 
-def test_a_scene_is_not_settled_while_the_gripper_fingers_still_move():
-    """Objects at rest but the fingers half-way open: a restore would close them (the state has
-    no gripper command) and knock what stands beside them, so the scene waits for the fingers."""
+def test_a_scene_is_not_settled_while_the_gripper_fingers_still_open():
+    """Objects at rest but the fingers opening: a restore would close them (the state has no
+    gripper command) and knock what stands beside them, so the scene waits for the fingers."""
     from pipeline.stage2.phases import settled_step
 
     ev = make_evidence(n=80)
@@ -75,4 +75,7 @@ def test_a_scene_is_not_settled_while_the_gripper_fingers_still_move():
     ev.gripper_opening[40:] = 0.08
     assert settled_step(ev, onset=20, speed_mps=0.01, settle_steps=10) == 40
     ev.gripper_opening[30:] = 0.0  # fingers still: the objects alone decide
+    assert settled_step(ev, onset=20, speed_mps=0.01, settle_steps=10) == 25
+    ev.gripper_opening[:30] = 0.08
+    ev.gripper_opening[30:40] = np.linspace(0.08, 0.0, 10)  # closing: a restore closes them too
     assert settled_step(ev, onset=20, speed_mps=0.01, settle_steps=10) == 25
