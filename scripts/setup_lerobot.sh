@@ -29,7 +29,7 @@ SITE=$("$VENV/bin/python" -c 'import sysconfig; print(sysconfig.get_paths()["pur
 cp "$ROOT/pipeline/lerobot_env/lerobot_compat.py" "$SITE/libero_recover_lerobot_compat.py"
 echo "import libero_recover_lerobot_compat; libero_recover_lerobot_compat.install()" \
   > "$SITE/libero_recover_lerobot_compat.pth"
-"$VENV/bin/python" - <<'PY'
+(cd "$(mktemp -d)" && "$VENV/bin/python" - <<'PY'
 import torch
 assert not torch.version.cuda, f"CUDA torch in the LeRobot env: {torch.__version__}"
 import torchvision.io  # noqa: F401  (through the compat hook)
@@ -42,4 +42,5 @@ from lerobot.scripts.lerobot_train import train  # noqa: F401
 from lerobot.processor.env_processor import LiberoProcessorStep  # noqa: F401
 print("lerobot", lerobot.__version__, "torch", torch.__version__)
 PY
+)  # in a scratch folder: importing the PolicyServer makes a logs/ folder in the working directory
 log "LeRobot environment ready: $VENV"
