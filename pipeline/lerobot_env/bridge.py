@@ -115,9 +115,7 @@ class Client:
 
     def __init__(self, settings: dict):
         import grpc
-        from lerobot.async_inference.helpers import RemotePolicyConfig
-        from lerobot.configs.policies import PreTrainedConfig
-        from lerobot.transport import services_pb2, services_pb2_grpc
+        from lerobot.transport import services_pb2
         from lerobot.transport.utils import grpc_channel_options
 
         self.pb = services_pb2
@@ -135,17 +133,28 @@ class Client:
         self.address = address
         self.channel = grpc.insecure_channel(address, grpc_channel_options())
         try:
+            self._connect(settings)
+        except BaseException:
+            self.close()  # a server we started goes with us
+            raise
+
+    def _connect(self, settings: dict) -> None:
+        import grpc
+        from lerobot.async_inference.helpers import RemotePolicyConfig
+        from lerobot.configs.policies import PreTrainedConfig
+        from lerobot.datasets.utils import hw_to_dataset_features
+        from lerobot.transport import services_pb2, services_pb2_grpc
+
+        try:
             grpc.channel_ready_future(self.channel).result(timeout=float(settings.get("connect_timeout_s", 180)))
         except grpc.FutureTimeoutError:
-            raise RuntimeError(f"LeRobot PolicyServer at {address} did not come up") from None
+            raise RuntimeError(f"LeRobot PolicyServer at {self.address} did not come up") from None
         self.stub = services_pb2_grpc.AsyncInferenceStub(self.channel)
         self.config = PreTrainedConfig.from_pretrained(settings["path"])
         image_keys = [k for k in self.config.input_features if k.startswith("observation.images.")]
         size = int(settings["image_size"])
         features = {name: float for name in STATE_NAMES}
         features.update({cam: (size, size, 3) for cam in CAMERAS})
-        from lerobot.datasets.utils import hw_to_dataset_features
-
         lerobot_features = hw_to_dataset_features(features, "observation", use_video=False)
         # only the cameras the checkpoint reads (after its rename map) go to the server
         rename = dict(settings.get("rename_map") or {})
@@ -183,7 +192,8 @@ class Client:
         return np.stack([a.get_action().numpy() for a in chunk]).astype(np.float32)
 
     def close(self) -> None:
-        self.channel.close()
+        if getattr(self, "channel", None) is not None:
+            self.channel.close()
         if self.server is not None:
             self.server.terminate()
             try:
@@ -197,12 +207,12 @@ def main() -> None:
     out = sys.stdout.buffer
     sys.stdout = sys.stderr  # LeRobot prints; the pipe is ours
     try:
-        client = Client(settings) if settings.get("path") else None  # no path: `prepare` only (tests)
-        preprocessor = env_preprocessor(client.config if client else None)
+        client = Client(settings)
+        preprocessor = env_preprocessor(client.config)
     except Exception as e:  # noqa: BLE001 (reported to the simulator side, which raises it)
         write_frame(out, {"error": np.array(f"{type(e).__name__}: {e}")})
         return
-    write_frame(out, {"describe": np.array(json.dumps(client.describe() if client else {}))})
+    write_frame(out, {"describe": np.array(json.dumps(client.describe()))})
     try:
         while True:
             req = read_frame(sys.stdin.buffer)
@@ -211,15 +221,11 @@ def main() -> None:
             flat = {k: v for k, v in req.items() if k not in ("op", "task")}
             try:
                 policy_input = libero_policy_input(nest(flat), str(req["task"]), preprocessor)
-                if str(req["op"]) == "prepare":  # the policy input itself (the parity test)
-                    write_frame(out, {k: np.asarray(v) for k, v in robot_observation(policy_input).items()})
-                    continue
                 write_frame(out, {"actions": client.act(robot_observation(policy_input))})
             except Exception as e:  # noqa: BLE001
                 write_frame(out, {"error": np.array(f"{type(e).__name__}: {e}")})
     finally:
-        if client is not None:
-            client.close()
+        client.close()
 
 
 if __name__ == "__main__":
