@@ -8,7 +8,8 @@ On a run with a release and recovery demos (`recover release`, `recover demos`):
 2. LeRobot's converter (v2.1 -> v3.0) and `lerobot-train`: a tiny ACT, `--steps` steps, CPU
    (`pipeline/policies/lerobot_train.py`); the loss of every 5th step is kept;
 3. stage 1 with the checkpoint as failure generator (`policy.kind: lerobot`, LeRobot's
-   PolicyServer): `--episodes` episodes, init state 0 of the tasks the demos came from;
+   PolicyServer): `--episodes` episodes, init state 0 of the tasks the demos came from, and
+   stage 2 (the run's localizer) on its failures: the new restorable scenes;
 4. `recover eval` of the clean scripted expert and the checkpoint side by side on the first
    `--scenes` eval scenes of the release, one trial each (gripper open, no RD, no official trials).
 Prints and writes (JSON) the figures: training steps, loss at start and end, episodes and trials
@@ -55,6 +56,7 @@ def main() -> dict:
     from pipeline.release.recovery_demos import read_demos
     from pipeline.layout import RunLayout
     from pipeline.stage1.run import run as run_stage1
+    from pipeline.stage2.run import run as run_stage2
 
     cfg = load_config(args.config)
     out = (args.out or cfg.out / "lerobot_loop").resolve()
@@ -105,6 +107,12 @@ def main() -> dict:
                          "steps": [e.steps for e in eps], "tasks": [f"{e.suite}/{e.task}" for e in eps],
                          "wall_s": round(time.perf_counter() - t0, 1)}
     print("stage 1:", figures["stage1"], flush=True)
+    # ... and stage 2 on its failures: the restorable scenes they give (the loop's "more failures")
+    t0 = time.perf_counter()
+    s2 = run_stage2(gen)
+    figures["stage2"] = {"scenes": s2.get("scenes"), "quarantined": s2.get("quarantine_reasons"),
+                         "onset_kinds": s2.get("onset_kinds"), "wall_s": round(time.perf_counter() - t0, 1)}
+    print("stage 2:", figures["stage2"], flush=True)
 
     # 4. recover eval: the clean scripted expert and the checkpoint on the release's eval scenes
     t0 = time.perf_counter()
