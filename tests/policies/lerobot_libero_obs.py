@@ -5,8 +5,10 @@ IN: robosuite's raw observation from LIBERO's `OffScreenRenderEnv` (its keys: `a
 `robot0_eef_pos`, ...), the controller's `ee_ori_mat`, `task`, and `ours/<key>`: what
 `pipeline.policies.lerobot_policy.libero_observation` built for the same simulator state.
 OUT: `theirs/<key>`: `lerobot/envs/libero.py:LiberoEnv._format_raw_obs` of the raw observation
-(flattened like ours), and `policy/<key>` / `ours_policy/<key>`: what the bridge hands the
-PolicyServer for theirs / ours (LeRobot's `preprocess_observation` + LIBERO env processor).
+(flattened like ours), and `policy/<key>` / `ours_policy/<key>` / `export_policy/<key>`: what
+the bridge hands the PolicyServer for theirs / ours / `export/<key>` (our observation of the
+state as the LeRobot export restores it), through LeRobot's `preprocess_observation` and LIBERO
+env processor.
 
 LeRobot's LIBERO module imports `libero` at the top (to build environments); nothing we call
 uses it, and LIBERO lives in the simulator's environment, so stand-in modules take its place.
@@ -58,11 +60,12 @@ def main(src: Path, dst: Path) -> None:
                                _env=types.SimpleNamespace(robots=[types.SimpleNamespace(controller=controller)]))
     task = str(data.pop("task"))
     ours = {k[len("ours/"):]: v for k, v in data.items() if k.startswith("ours/")}
-    raw = {k: v for k, v in data.items() if not k.startswith("ours/")}
+    export = {k[len("export/"):]: v for k, v in data.items() if k.startswith("export/")}
+    raw = {k: v for k, v in data.items() if not k.startswith(("ours/", "export/"))}
     theirs = LiberoEnv._format_raw_obs(me, raw)
     pre = bridge.env_preprocessor()
     out = {f"theirs/{k}": v for k, v in flatten(theirs).items()}
-    for name, obs in (("policy", theirs), ("ours_policy", bridge.nest(ours))):
+    for name, obs in (("policy", theirs), ("ours_policy", bridge.nest(ours)), ("export_policy", bridge.nest(export))):
         policy_input = bridge.robot_observation(bridge.libero_policy_input(obs, task, pre))
         out.update({f"{name}/{k}": np.asarray(v) for k, v in policy_input.items()})
     np.savez(dst, **out)

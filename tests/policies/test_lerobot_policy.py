@@ -45,8 +45,7 @@ class Cameras:  # what rollout.observe asks of an image policy
 def test_observation_equals_what_lerobots_libero_env_builds(tmp_path):
     from libero.libero.envs import OffScreenRenderEnv
 
-    from pipeline.release import lerobot_format as fmt
-    from pipeline.release.lerobot_export import libero_frame, libero_state
+    from pipeline.release.lerobot_export import render_episode
     from pipeline.sim import tasks
     from pipeline.sim.restore import restore
 
@@ -60,8 +59,13 @@ def test_observation_equals_what_lerobots_libero_env_builds(tmp_path):
             env.step(a)
         state = env.get_state()
         ours = libero_observation(observe(env, Cameras(), len(actions)))
-        export_frames = {k: libero_frame(env.render(cam, SIZE)) for k, cam in fmt.VIDEO_KEYS.items()}
-        export_state = libero_state(env).astype(np.float32)
+        # what the LeRobot export writes for this state (it sets each logged state, then draws)
+        robot, frames = render_episode(env, state[None], SIZE)
+        export_frames = {k: v[0] for k, v in frames.items()}
+        export_state = robot[0].astype(np.float32)
+        # after a step MuJoCo's body poses are those before the last substep's integration (what
+        # LIBERO draws then too); a set state has its own: the export's frames are of the latter
+        export_obs = libero_observation(observe(env, Cameras(), 0))
     # LIBERO's own environment: the same restore (plain LIBERO plus restore's three lines), then
     # robosuite's own env.step: the same states bit for bit (pipeline/sim/restore.py)
     lib = OffScreenRenderEnv(bddl_file_name=str(task.bddl_path), camera_heights=SIZE, camera_widths=SIZE)
@@ -79,7 +83,7 @@ def test_observation_equals_what_lerobots_libero_env_builds(tmp_path):
     keys = ["agentview_image", "robot0_eye_in_hand_image", "robot0_eef_pos", "robot0_eef_quat",
             "robot0_gripper_qpos", "robot0_gripper_qvel", "robot0_joint_pos", "robot0_joint_vel"]
     np.savez(tmp_path / "in.npz", **{k: raw[k] for k in keys}, ee_ori_mat=mat, task=np.array(task.instruction),
-             **{f"ours/{k}": v for k, v in ours.items()})
+             **{f"ours/{k}": v for k, v in ours.items()}, **{f"export/{k}": v for k, v in export_obs.items()})
     res = subprocess.run([str(LEROBOT_PYTHON), str(Path(__file__).with_name("lerobot_libero_obs.py")),
                           str(tmp_path / "in.npz"), str(tmp_path / "out.npz")], capture_output=True, text=True,
                          timeout=300, env={**os.environ, "HF_HUB_OFFLINE": "1"})
@@ -95,13 +99,14 @@ def test_observation_equals_what_lerobots_libero_env_builds(tmp_path):
     policy = {k[len("policy/"):]: v for k, v in out.items() if k.startswith("policy/")}
     for k, v in policy.items():
         assert np.array_equal(out[f"ours_policy/{k}"], v), k
-    # the export shows a policy what LeRobot's LIBERO processing shows it (turned 180 degrees)
-    assert np.array_equal(export_frames["observation.images.image"], policy["image"])
-    assert np.array_equal(export_frames["observation.images.image2"], policy["image2"])
-    names = ["eef_x", "eef_y", "eef_z", "axis_angle1", "axis_angle2", "axis_angle3", "gripper_left", "gripper_right"]
-    served = np.array([float(policy[n]) for n in names], dtype=np.float32)
-    assert np.allclose(export_state, served, atol=1e-6), (export_state, served)  # LeRobot's float32 arithmetic
     assert str(policy["task"]) == task.instruction
+    # the export shows a policy what LeRobot's LIBERO processing shows it (turned 180 degrees)
+    served = {k[len("export_policy/"):]: v for k, v in out.items() if k.startswith("export_policy/")}
+    assert np.array_equal(export_frames["observation.images.image"], served["image"])
+    assert np.array_equal(export_frames["observation.images.image2"], served["image2"])
+    names = ["eef_x", "eef_y", "eef_z", "axis_angle1", "axis_angle2", "axis_angle3", "gripper_left", "gripper_right"]
+    state8 = np.array([float(served[n]) for n in names], dtype=np.float32)
+    assert np.allclose(export_state, state8, atol=1e-6), (export_state, state8)  # LeRobot's float32 arithmetic
 
 
 @pytest.fixture(scope="module")
