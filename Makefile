@@ -20,7 +20,7 @@ $(VENV)/.setup-stamp: pyproject.toml requirements/sim.txt scripts/setup.sh
 
 setup: $(VENV)/.setup-stamp
 
-$(VENV)/.setup-test-stamp: $(VENV)/.setup-stamp requirements/lerobot-reader.txt scripts/setup_lerobot_reader.sh
+$(VENV)/.setup-test-stamp: $(VENV)/.setup-stamp requirements/lerobot.txt pipeline/lerobot_env/lerobot_compat.py scripts/setup_lerobot.sh
 	WITH_BROWSER=1 WITH_LEROBOT=1 WITH_POSTGRES=1 bash scripts/setup.sh
 	touch $@
 

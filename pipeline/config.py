@@ -166,16 +166,44 @@ class OpenpiPolicyConfig(_Strict):
     rotate_180: bool = True
 
 
+class LerobotPolicyConfig(_Strict):
+    """A LeRobot checkpoint served by LeRobot's async-inference PolicyServer
+    (pipeline/policies/lerobot_policy.py)."""
+
+    # a checkpoint folder (`.../checkpoints/last/pretrained_model`: config.json, model.safetensors
+    # and the pre/post-processor files) or a hub id; required when kind is lerobot
+    path: str | None = None
+    device: Literal["cpu", "cuda"] = "cpu"
+    # what LeRobot's LIBERO env renders (observation_height/width); the server resizes to the
+    # checkpoint's image shape, so render at that shape to avoid a resize
+    image_size: int = Field(default=256, ge=32, le=1024)
+    # "host:port" of a PolicyServer you run (`python -m lerobot.async_inference.policy_server`;
+    # it serves one client: one per worker); default: each worker starts its own on loopback
+    server: str | None = None
+    # LeRobot's rename map (dataset key -> the checkpoint's key), as `lerobot-eval --rename_map`
+    rename_map: dict[str, str] = Field(default_factory=dict)
+    # the LeRobot environment's interpreter; default <repository>/.venv-lerobot/bin/python
+    python: Path | None = None
+    connect_timeout_s: float = Field(default=300.0, gt=0)
+
+
 class PolicyConfig(_Strict):
     # recovery: the zero-noise recovery expert (a reference for eval; it takes no settings)
-    kind: Literal["scripted", "openpi", "recovery"] = "scripted"
+    kind: Literal["scripted", "openpi", "recovery", "lerobot"] = "scripted"
     name: str | None = None  # recorded with each episode; defaults to kind
     scripted: ScriptedPolicyConfig = ScriptedPolicyConfig()
     openpi: OpenpiPolicyConfig = OpenpiPolicyConfig()
+    lerobot: LerobotPolicyConfig = LerobotPolicyConfig()
     # eval only: this policy's temporal context, in place of eval.temporal_context, so one
     # server is evaluated without context, with the initial frame and with the history side
     # by side (three entries with three names: one report row each)
     temporal_context: Literal["none", "initial_frame", "history"] | None = None
+
+    @model_validator(mode="after")
+    def _lerobot_needs_a_path(self) -> PolicyConfig:
+        if self.kind == "lerobot" and not self.lerobot.path:
+            raise ValueError("lerobot.path: a LeRobot checkpoint folder or hub id is required for kind lerobot")
+        return self
 
 
 class VideoConfig(_Strict):

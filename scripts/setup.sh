@@ -41,6 +41,6 @@ $PIP -e "$ROOT[dev,vlm]"
 # --- LIBERO config + assets (never let `import libero.libero` call input()) ---
 "$VENV/bin/python" -c "from pipeline.sim.libero_setup import main; main()"
 
-# --- LeRobot's own dataset reader for the export test: a separate .venv-lerobot (numpy 2) ---
-if [ "${WITH_LEROBOT:-0}" = 1 ]; then bash "$ROOT/scripts/setup_lerobot_reader.sh"; fi
+# --- the LeRobot environment (lerobot 0.4.4 on CPU torch; numpy 2): a separate .venv-lerobot ---
+if [ "${WITH_LEROBOT:-0}" = 1 ]; then bash "$ROOT/scripts/setup_lerobot.sh"; fi
 log "done. Activate with: source .venv/bin/activate"

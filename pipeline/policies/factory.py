@@ -1,7 +1,8 @@
 """Build the configured policy: `make_policy(PolicyConfig) -> Policy`.
 
 Imports each policy kind lazily, so a state-only run never loads the openpi client and an
-openpi run never loads the scripted planner. `recovery` is the zero-noise recovery
+openpi run never loads the scripted planner; `lerobot` is a LeRobot checkpoint behind
+LeRobot's PolicyServer (lerobot_policy.py). `recovery` is the zero-noise recovery
 expert (a reference policy for `recover eval`; stage 1 generates failures with `scripted`).
 """
 
@@ -25,4 +26,8 @@ def make_policy(cfg: PolicyConfig) -> Policy:
         from pipeline.policies.openpi_policy import OpenpiPolicy
 
         return OpenpiPolicy(cfg.openpi, name=cfg.name)
+    if cfg.kind == "lerobot":
+        from pipeline.policies.lerobot_policy import LerobotPolicy
+
+        return LerobotPolicy(cfg.lerobot, name=cfg.name)
     raise ConfigError(f"policy.kind: unknown policy kind {cfg.kind!r}")

@@ -8,9 +8,11 @@ release manifest (`scenarios.parquet`, for the histories), and the recovery demo
 `recoveries/` (the recovery demos, rendered in their scene's own BDDL model; task = the
 original instruction; episodes.jsonl also names each demo's scene id, level and
 category), each a LeRobot v2.1 dataset (`pipeline.release.lerobot_format`). Frames are rendered from the
-logged states at 20 Hz (every control step), third-person and wrist cameras, right side
-up, at `release.lerobot_render_quality` (standard: LIBERO's look); state = eef position, eef
-axis-angle, the two gripper finger positions (8-D, as in LIBERO's LeRobot datasets), with the
+logged states at 20 Hz (every control step), third-person and wrist cameras
+(`observation.images.image`, `observation.images.image2`) as LeRobot's LIBERO env shows them to a
+policy (robosuite's raw image turned 180 degrees; `FORMAT_VERSION` below), at
+`release.lerobot_render_quality` (standard: LIBERO's look); state = eef position, eef
+axis-angle (of robosuite's `robot0_eef_quat`), the two gripper finger positions (8-D, as in LIBERO's LeRobot datasets), with the
 arm's joint states beside it (`observation.states.joint_state`: the 7 joint positions;
 `observation.states.gripper_state`: the 2 finger joints); action = the 7-D command, float32 as
 in LIBERO's LeRobot datasets, and beside it `action_float64`, the same command exactly as the
@@ -54,7 +56,6 @@ from pipeline.runner import Stage, UnitResult, WorkerContext
 from pipeline.sim import SimEnv, TaskSpec, get_task
 from pipeline.sim.pool import model_key
 from pipeline.sim.render import RENDERER_VERSION
-from pipeline.sim.rotations import mat_to_quat
 
 
 @dataclass
@@ -77,12 +78,28 @@ class ExportEpisode:
         return scene_task(self.suite, self.task, self.instruction, self.bddl)
 
 
-def axis_angle(rot: np.ndarray) -> np.ndarray:
-    q = mat_to_quat(rot)
-    if q[0] < 0:  # same rotation, angle kept in [0, pi]
-        q = -q
-    s = np.sqrt(max(1.0 - q[0] ** 2, 0.0))
-    return np.zeros(3) if s < 1e-9 else q[1:] * (2 * np.arccos(min(q[0], 1.0)) / s)
+# The dataset's convention (format version 2) is what LeRobot's LIBERO env gives a policy
+# (`lerobot/envs/libero.py` + its `LiberoProcessorStep`, the convention of LIBERO's LeRobot datasets),
+# so a policy trained on it runs unchanged under `lerobot-eval --env.type=libero` and `policy.kind:
+# lerobot`: images are robosuite's raw image turned 180 degrees (our right-side-up frame mirrored
+# left-right), state = eef position, axis-angle of robosuite's `robot0_eef_quat`, gripper qpos.
+# Version 1 (before): frames right side up, the axis-angle of the grip site's rotation.
+FORMAT_VERSION = 2
+
+
+def libero_frame(frame: np.ndarray) -> np.ndarray:
+    """Our right-side-up frame as LeRobot's LIBERO env shows it: robosuite's raw image (ours
+    flipped vertically) turned 180 degrees, i.e. ours mirrored left-right."""
+    return np.ascontiguousarray(frame[:, ::-1])
+
+
+def libero_state(env: SimEnv) -> np.ndarray:
+    """The 8-D state of LeRobot's LIBERO env for the current simulator state."""
+    from pipeline.policies.openpi_policy import quat_xyzw_to_axis_angle
+
+    r = env.robot_observables()
+    return np.concatenate([r["robot0_eef_pos"], quat_xyzw_to_axis_angle(r["robot0_eef_quat"]),
+                           r["robot0_gripper_qpos"]])
 
 
 def render_episode(env: SimEnv, states: np.ndarray, size: int,
@@ -91,10 +108,9 @@ def render_episode(env: SimEnv, states: np.ndarray, size: int,
     robot, frames = [], {k: [] for k in fmt.VIDEO_KEYS}
     for s in states:
         env.set_state(s)
-        pos, rot = env.eef_pose()
-        robot.append(np.concatenate([pos, axis_angle(rot), env.gripper_qpos()]))
+        robot.append(libero_state(env))
         for key, cam in fmt.VIDEO_KEYS.items():
-            frames[key].append(env.render(cam, size, quality))
+            frames[key].append(libero_frame(env.render(cam, size, quality)))
     return np.asarray(robot), {k: np.stack(v) for k, v in frames.items()}
 
 
@@ -274,7 +290,7 @@ class ExportStage(Stage[ExportUnit]):
         return unit.model
 
     def fingerprint(self, unit: ExportUnit) -> dict:
-        return {"renderer_version": RENDERER_VERSION}
+        return {"renderer_version": RENDERER_VERSION, "format_version": FORMAT_VERSION}
 
     def process(self, unit: ExportUnit, ctx: WorkerContext) -> UnitResult:
         ep = unit.episode
@@ -289,15 +305,17 @@ class ExportStage(Stage[ExportUnit]):
 
 
 def refuse_old_renders(stage: ExportStage, units: list[ExportUnit]) -> None:
-    """An export resumed over episodes drawn by an older renderer would mix two looks in one
-    training set (markers of those carry no renderer version): refuse, naming the fix."""
+    """An export resumed over episodes drawn by an older renderer, or in the older convention
+    (format version 1: other orientation and state), would mix two looks in one training set
+    (markers of those carry neither version): refuse, naming the fix."""
     from pipeline.runner.runner import recorded_inputs
 
     done = recorded_inputs(stage, units)
     old = [u for u in units if stage.unit_id(u) in done and done[stage.unit_id(u)] != stage.fingerprint(u)]
     if old:
         raise FatalError(f"export-lerobot {Path(stage.dataset).name}: {len(old)} episode(s) in {stage.dataset} were "
-                         f"rendered by an older renderer (robosuite's collision geometry; now version {RENDERER_VERSION}); "
+                         f"rendered by an older renderer or in the older image and state convention (now renderer "
+                         f"{RENDERER_VERSION}, format {FORMAT_VERSION}); "
                          f"delete {stage.dataset} and {stage.work} and run `recover export-lerobot --config <this "
                          f"run's config>` again to re-render them")
 

@@ -31,8 +31,9 @@ CHUNKS_SIZE = 1000
 FPS = 20
 DATA_PATH = "data/chunk-{episode_chunk:03d}/episode_{episode_index:06d}.parquet"
 VIDEO_PATH = "videos/chunk-{episode_chunk:03d}/{video_key}/episode_{episode_index:06d}.mp4"
-# LeRobot key -> our camera; the names of LIBERO's own LeRobot datasets
-VIDEO_KEYS = {"observation.images.image": "agentview", "observation.images.wrist_image": "robot0_eye_in_hand"}
+# LeRobot key -> our camera: the names LeRobot's LIBERO env gives policies (`image`, `image2`;
+# its docs' HuggingFaceVLA/libero), so a policy trained here reads them unrenamed
+VIDEO_KEYS = {"observation.images.image": "agentview", "observation.images.image2": "robot0_eye_in_hand"}
 STATE_NAMES = ["x", "y", "z", "axis_angle1", "axis_angle2", "axis_angle3", "gripper_left", "gripper_right"]
 ACTION_NAMES = ["dx", "dy", "dz", "droll", "dpitch", "dyaw", "gripper"]
 ACTION_F64 = "action_float64"

@@ -400,6 +400,22 @@ class SimEnv:
         w, x, y, z = self.env.sim.data.get_body_xquat(robot.robot_model.eef_name)
         return np.array([x, y, z, w])
 
+    def robot_observables(self) -> dict[str, np.ndarray]:
+        """robosuite's proprioceptive observables of robot0, as its observation dict names them
+        (what LeRobot's LIBERO env reads: `lerobot/envs/libero.py:_format_raw_obs`), read from
+        the current state, plus the controller's end-effector rotation (`ee_ori_mat`)."""
+        robot = self.env.robots[0]
+        d = self.env.sim.data
+        return {
+            "robot0_eef_pos": np.array(d.site_xpos[robot.eef_site_id]),
+            "robot0_eef_quat": self.eef_hand_quat(),
+            "robot0_gripper_qpos": np.array(d.qpos[robot._ref_gripper_joint_pos_indexes]),
+            "robot0_gripper_qvel": np.array(d.qvel[robot._ref_gripper_joint_vel_indexes]),
+            "robot0_joint_pos": np.array(d.qpos[robot._ref_joint_pos_indexes]),
+            "robot0_joint_vel": np.array(d.qvel[robot._ref_joint_vel_indexes]),
+            "ee_ori_mat": np.array(robot.controller.ee_ori_mat),
+        }
+
     def gripper_qpos(self) -> np.ndarray:
         robot = self.env.robots[0]
         return np.array(self.env.sim.data.qpos[robot._ref_gripper_joint_pos_indexes])

@@ -54,7 +54,7 @@ def test_export_writes_the_v21_layout(exported):
     assert info["splits"].get("eval", "").endswith(":2") and info["splits"].get("train", "0:0").startswith("0:")
     for ep in (0, 1):
         assert (root / f"data/chunk-000/episode_{ep:06d}.parquet").is_file()
-        for key in ("observation.images.image", "observation.images.wrist_image"):
+        for key in ("observation.images.image", "observation.images.image2"):
             assert (root / f"videos/chunk-000/{key}/episode_{ep:06d}.mp4").is_file()
     episodes = [json.loads(x) for x in (root / "meta/episodes.jsonl").read_text().splitlines()]
     # where each began: LIBERO's init state 0 of the task, then 10 settle steps (make_run's episodes)
@@ -124,7 +124,7 @@ def test_lerobots_own_dataset_class_opens_the_export(exported, tmp_path):
     out, src = exported
     if not READER_PYTHON.is_file():
         pytest.fail(f"LeRobot reader environment missing ({READER_PYTHON}); build it with `make setup-test` "
-                    "(or `bash scripts/setup_lerobot_reader.sh`)")
+                    "(or `bash scripts/setup_lerobot.sh`)")
     root = out / "rollouts"
     env = {**os.environ, "HF_HUB_OFFLINE": "1", "HF_HOME": str(tmp_path / "hf")}
     # frame 30 = episode 1, frame 6: checks LeRobot's episode -> video offsets, not just the first frame
@@ -140,7 +140,7 @@ def test_lerobots_own_dataset_class_opens_the_export(exported, tmp_path):
     assert got["features"]["observation.states.gripper_state"] == {"dtype": "float32", "shape": [2]}
     assert got["features"]["action"] == {"dtype": "float32", "shape": [7]}
     assert got["features"]["action_float64"] == {"dtype": "float64", "shape": [7]}
-    cams = ["observation.images.image", "observation.images.wrist_image"]
+    cams = ["observation.images.image", "observation.images.image2"]
     assert sorted(got["video_keys"]) == cams
     table = pq.read_table(root / "data/chunk-000/episode_000001.parquet")
     first, mid = got["frames"]

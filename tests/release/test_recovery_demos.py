@@ -22,7 +22,7 @@ from tests.release.test_lerobot_export import READER_PYTHON
 pytestmark = pytest.mark.sim
 
 SIZE = 64
-CAMS = ["observation.images.image", "observation.images.wrist_image"]
+CAMS = ["observation.images.image", "observation.images.image2"]
 
 
 def _config(run: Path, **release):

@@ -78,3 +78,9 @@ def test_lerobot_export_refuses_to_resume_over_episodes_an_older_renderer_drew(t
     marks.mark_done(stage.marker_id(units[1]), {})  # a marker from before renderer versions were recorded
     with pytest.raises(FatalError, match=r"1 episode\(s\).*older renderer.*recover export-lerobot"):
         refuse_old_renders(stage, units)
+    # this renderer, but the export's first convention (frames right side up, grip-site axis-angle)
+    from pipeline.sim.render import RENDERER_VERSION
+
+    marks.mark_done(stage.marker_id(units[1]), {"inputs": {"renderer_version": RENDERER_VERSION}})
+    with pytest.raises(FatalError, match=r"1 episode\(s\).*older image and state convention"):
+        refuse_old_renders(stage, units)
