@@ -32,7 +32,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 
 
-def _setup(code: Path, db_url: str, run: Path, n_items: int, n_users: int, build_run: bool) -> None:
+def _setup(code: Path, db_url: str, run: Path, n_items: int, n_users: int, build_run: bool, k: int = 2) -> None:
     """Runs under `code`'s own pipeline (its schema, its enqueue): prints the users' tokens."""
     sys.path.insert(0, str(code))
     from pipeline.records import Category, Characterization, Level
@@ -53,7 +53,7 @@ def _setup(code: Path, db_url: str, run: Path, n_items: int, n_users: int, build
             ch = Characterization(key=u.key, recovery_level=Level.L3, failure_category=Category.object_displacement,
                                   recovery_action="Set the bowl upright", source="simstate")
             enqueue(s, key=f"{u.key}-c{i:05d}", instruction=u.localization.instruction,
-                    proposal=proposal_for(u, ch, None), context=context(run, u, 20, 10.0), required_reviews=2)
+                    proposal=proposal_for(u, ch, None), context=context(run, u, 20, 10.0), required_reviews=k)
     tokens = [add_user(engine, f"r{i}", "reviewer") for i in range(n_users)]
     engine.dispose()
     print(json.dumps(tokens))
@@ -226,8 +226,9 @@ def main() -> int:
         ap.add_argument("--items", type=int, required=True)
         ap.add_argument("--users", type=int, required=True)
         ap.add_argument("--build-run", action="store_true")
+        ap.add_argument("--k", type=int, default=2)
         a = ap.parse_args()
-        _setup(Path(a.code), a.db, Path(a.run), a.items, a.users, a.build_run)
+        _setup(Path(a.code), a.db, Path(a.run), a.items, a.users, a.build_run, a.k)
         return 0
     if len(sys.argv) > 1 and sys.argv[1] == "_serve":
         ap = argparse.ArgumentParser()

@@ -8,7 +8,8 @@ Configurations (each its own database and `recover review serve` processes):
   sqlite-1  SQLite, 1 server process     sqlite-2  SQLite, 2     postgres-2  PostgreSQL, 2
 (PostgreSQL: a throwaway cluster, `tests/pg_cluster.py`). With `--base DIR` the same SQLite
 configurations run again with the server code of another checkout (e.g. the issue's base
-commit, `git worktree add --detach DIR b67844a`), in the same run, for comparison.
+commit, `git worktree add --detach DIR b67844a`), in the same run, for comparison; every
+database is built by its own checkout's code (`prepare`), all items up front.
 Reported per configuration: decision and item-page p50/p95/p99, decisions/s, server CPU per
 item (the server processes; on PostgreSQL also the database's), decisions lost (acknowledged
 but not stored), items over K, refusals (decisions not answered 200). A saturation run
@@ -37,18 +38,13 @@ from pathlib import Path
 
 import httpx
 import yaml
-from sqlalchemy import func, select
+from sqlalchemy import create_engine, func, select
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from pipeline.records import Category, Characterization, Level  # noqa: E402
-from pipeline.review.auth import add_user  # noqa: E402
-from pipeline.review.db import Item, Review, User, make_engine, read_session, write_session  # noqa: E402
-from pipeline.review.enqueue import enqueue  # noqa: E402
+from pipeline.review.db import Item, Review, User, read_session  # noqa: E402
 from pipeline.review.server import free_port  # noqa: E402
-from pipeline.stage3.inputs import collect, context  # noqa: E402
-from pipeline.stage3.run import proposal_for  # noqa: E402
 from tests.review.sample_run import build  # noqa: E402
 
 CONFIGS = {"sqlite-1": ("sqlite", 1), "sqlite-2": ("sqlite", 2), "postgres-2": ("postgresql", 2)}
@@ -56,17 +52,16 @@ AIMS = {"decision_p95_ms": 100.0, "item_page_p95_ms": 150.0}
 SATURATION_REVIEWERS = 20
 
 
-def fill(run: Path, engine, n_items: int, k: int, tag: str) -> None:
-    """n_items queue items sharing the sample run's media (distinct episode keys)."""
-    units = [u for u in collect(run) if u.localization is not None]
-    for start in range(0, n_items, 500):
-        with write_session(engine) as s:
-            for i in range(start, min(n_items, start + 500)):
-                u = units[i % len(units)]
-                ch = Characterization(key=u.key, recovery_level=Level.L3, failure_category=Category.object_displacement,
-                                      recovery_action="Set the bowl upright", source="simstate")
-                enqueue(s, key=f"{u.key}-{tag}{i:05d}", instruction=u.localization.instruction,
-                        proposal=proposal_for(u, ch, None), context=context(run, u, 20, 10.0), required_reviews=k)
+def prepare(code: Path, db_url: str, run: Path, n_items: int, n_users: int, k: int) -> list[str]:
+    """The database as checkout `code` builds it (its schema, migrations and enqueue, through
+    `review_cpu.py _setup`): `n_items` queue items sharing the sample run's media, and the
+    tokens of `n_users` reviewers. Another checkout's server thus runs on a database of its own
+    making (the base commit's schema lacks later columns, e.g. `leases.taken_at`)."""
+    env = {**os.environ, "PYTHONPATH": str(code)}
+    out = subprocess.run([sys.executable, str(REPO / "benchmarks" / "review_cpu.py"), "_setup", "--code", str(code),
+                          "--db", db_url, "--run", str(run), "--items", str(n_items), "--users", str(n_users),
+                          "--k", str(k)], cwd=code, env=env, check=True, capture_output=True, text=True)
+    return json.loads(out.stdout.strip().splitlines()[-1])
 
 
 def cpu_s(pid: int) -> float:
@@ -275,11 +270,13 @@ class Server:
 
 def run_config(name: str, code: Path, db_url: str, workers: int, run: Path, tmp: Path, args,
                pg_pid: int | None) -> dict:
-    engine = make_engine(db_url)
-    tokens = [add_user(engine, f"r{i}", "reviewer") for i in range(args.reviewers)]
-    # enough items for everyone at the expected pace, with room to spare
+    # enough items for everyone at the expected pace, with room to spare, then for the saturation run
     expected = args.reviewers * args.duration_s / max(args.think_mean_s, 0.5)
-    fill(run, engine, int(1.5 * expected / args.k) + 50, args.k, tag=f"{name}-h")
+    n_items = int(1.5 * expected / args.k) + 50
+    if args.saturation_s > 0:
+        n_items += int(300 * args.saturation_s / args.k) + 50
+    tokens = prepare(code, db_url, run, n_items, args.reviewers, args.k)
+    engine = create_engine(db_url)  # reads only: another checkout's database is not migrated by this code
     cfg = tmp / f"{name}.yaml"
     cfg.write_text(yaml.safe_dump({"run": {"output_dir": str(run)},
                                    "stage3": {"reviews_per_item": args.k, "db_url": db_url}}))
@@ -290,8 +287,6 @@ def run_config(name: str, code: Path, db_url: str, workers: int, run: Path, tmp:
                                          ("saturation", SATURATION_REVIEWERS, 0.0, args.saturation_s)):
             if duration <= 0:
                 continue
-            if mode == "saturation":
-                fill(run, engine, int(300 * duration / args.k) + 50, args.k, tag=f"{name}-s")
             cpu0, db0 = cpu_s(server.proc.pid), cpu_s(pg_pid) if pg_pid else 0.0
             res = load(server.url, tokens[:n], think, duration, args.seed, args.clients)
             n_dec = max(1, res["decisions"])
