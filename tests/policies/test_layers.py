@@ -34,8 +34,8 @@ for layer, names in enumerate([
      "scripted.recovery.stand_book", "scripted.recovery.operate", "scripted.recovery.put_aside",
      "scripted.recovery.under_drawer", "scripted.recovery.pick_place", "scripted.recovery.rules",
      "scripted.recovery.planner", "scripted.recovery.expert", "scripted.recovery"],
-    # the other failure generators and the factory that picks one
-    ["openpi_policy", "factory", ""],
+    # the other failure generators (and LeRobot's training beside its policy) and the factory
+    ["openpi_policy", "lerobot_policy", "lerobot_train", "factory", ""],
 ]):
     for n in names:
         LAYERS[n] = layer
