@@ -166,14 +166,10 @@ def measure(label: str, code: Path, run: Path, tmp: Path, args, db_url: str, bui
     import yaml
 
     sys.path.insert(0, str(REPO))
-    from benchmarks.review_load import Server, cpu_s
+    from benchmarks.review_load import Server, cpu_s, prepare
 
     n_items = max(args.queue, (args.cycles + args.warmup) // 2 + 2 * args.clients + 10)
-    env = {**os.environ, "PYTHONPATH": str(code)}
-    tokens = json.loads(subprocess.run(
-        [sys.executable, str(Path(__file__).resolve()), "_setup", "--code", str(code), "--db", db_url, "--run", str(run),
-         "--items", str(n_items), "--users", str(args.clients)] + (["--build-run"] if build_run else []),
-        cwd=code, env=env, check=True, capture_output=True, text=True).stdout.strip().splitlines()[-1])
+    tokens = prepare(code, db_url, run, n_items, args.clients, build_run=build_run)
     cfg = tmp / f"{label}.yaml"
     cfg.write_text(yaml.safe_dump({"run": {"output_dir": str(run)}, "stage3": {"reviews_per_item": 2, "db_url": db_url}}))
     if args.profile:

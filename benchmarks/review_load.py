@@ -52,15 +52,17 @@ AIMS = {"decision_p95_ms": 100.0, "item_page_p95_ms": 150.0}
 SATURATION_REVIEWERS = 20
 
 
-def prepare(code: Path, db_url: str, run: Path, n_items: int, n_users: int, k: int) -> list[str]:
+def prepare(code: Path, db_url: str, run: Path, n_items: int, n_users: int, k: int = 2,
+            build_run: bool = False) -> list[str]:
     """The database as checkout `code` builds it (its schema, migrations and enqueue, through
     `review_cpu.py _setup`): `n_items` queue items sharing the sample run's media, and the
-    tokens of `n_users` reviewers. Another checkout's server thus runs on a database of its own
+    tokens of `n_users` reviewers (`build_run`: `code` first writes the sample run). Another checkout's server thus runs on a database of its own
     making (the base commit's schema lacks later columns, e.g. `leases.taken_at`)."""
     env = {**os.environ, "PYTHONPATH": str(code)}
     out = subprocess.run([sys.executable, str(REPO / "benchmarks" / "review_cpu.py"), "_setup", "--code", str(code),
                           "--db", db_url, "--run", str(run), "--items", str(n_items), "--users", str(n_users),
-                          "--k", str(k)], cwd=code, env=env, check=True, capture_output=True, text=True)
+                          "--k", str(k)] + (["--build-run"] if build_run else []),
+                         cwd=code, env=env, check=True, capture_output=True, text=True)
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
