@@ -130,7 +130,7 @@ def main() -> None:
 
     scripted = load_config(args.config).stage1.policy.scripted.model_dump()
     noise = scripted["noise"]
-    zero = {**scripted, "noise": {k: 0 for k in noise}}
+    zero = {**scripted, "noise": {k: 0 for k in noise}, "noise_by_suite": {}}
     units = []
     for suite in args.suites:
         chosen = tasks([suite])[:: args.task_stride][: args.tasks_per_suite]

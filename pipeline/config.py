@@ -153,6 +153,20 @@ class ScriptedPolicyConfig(_Strict):
     chunk_len: int = Field(default=8, ge=1, le=32)
     # tries per goal conjunct (re-grasp after a miss or a drop) before moving on
     max_attempts: int = Field(default=3, ge=1)
+    # a suite's own noise in place of `noise` (all knobs), for suites whose tasks rarely fail
+    # at the common setting; empty = every suite uses `noise`
+    noise_by_suite: dict[str, ScriptedNoise] = Field(default_factory=dict)
+
+    @field_validator("noise_by_suite")
+    @classmethod
+    def _known_noise_suites(cls, v: dict[str, ScriptedNoise]) -> dict[str, ScriptedNoise]:
+        bad = [s for s in v if s not in SUITES]
+        if bad:
+            raise ValueError(f"unknown suite(s) {bad}; choose from {list(SUITES)}")
+        return v
+
+    def noise_for(self, suite: str) -> ScriptedNoise:
+        return self.noise_by_suite.get(suite, self.noise)
 
 
 class OpenpiPolicyConfig(_Strict):

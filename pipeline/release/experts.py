@@ -37,7 +37,7 @@ def plain_expert(cfg: Config) -> Policy:
     """The scripted expert with every noise knob at zero."""
     from pipeline.policies.scripted import make_scripted_policy
 
-    clean = cfg.stage1.policy.scripted.model_copy(update={"noise": ScriptedNoise()})
+    clean = cfg.stage1.policy.scripted.model_copy(update={"noise": ScriptedNoise(), "noise_by_suite": {}})
     return make_scripted_policy(clean, name="scripted-expert")
 
 

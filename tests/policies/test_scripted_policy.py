@@ -61,6 +61,20 @@ def test_same_seed_gives_identical_actions_and_other_seeds_differ(spatial_env):
 
 
 @pytest.mark.sim
+def test_a_suites_own_noise_replaces_the_common_noise_for_that_suite_only(spatial_env):
+    task, env = spatial_env
+    noisy = record_actions(task, env, make_scripted_policy(ScriptedPolicyConfig(noise=NOISY)), seed=3, steps=40)
+    own = ScriptedPolicyConfig(noise=ScriptedNoise(), noise_by_suite={task.suite: NOISY})
+    other = ScriptedPolicyConfig(noise=NOISY, noise_by_suite={"libero_90": ScriptedNoise()})
+    assert np.array_equal(np.array(record_actions(task, env, make_scripted_policy(own), seed=3, steps=40)),
+                          np.array(noisy))
+    assert np.array_equal(np.array(record_actions(task, env, make_scripted_policy(other), seed=3, steps=40)),
+                          np.array(noisy))
+    with pytest.raises(ValueError, match="unknown suite"):
+        ScriptedPolicyConfig(noise_by_suite={"libero_100": NOISY})
+
+
+@pytest.mark.sim
 def test_chunks_are_n_by_7_within_unit_bounds(spatial_env):
     task, env = spatial_env
     policy = make_scripted_policy(ScriptedPolicyConfig(noise=NOISY, chunk_len=16))

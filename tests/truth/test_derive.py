@@ -28,9 +28,21 @@ def test_the_first_failed_attempt_gives_onset_category_and_level():
                                                                                "placement_failure", "L2")
 
 
-@pytest.mark.parametrize("release, category", [(0.05, "placement_failure"), (0.3, "grasp_failure")])
-def test_a_drop_near_the_reference_is_a_placement_failure_elsewhere_a_grasp_failure(release, category):
-    rows = [row(0, "dropped", release=release, changes=[change("bowl_1", 0.12)])]
+PHASES = [{"label": "close", "step": 10}, {"label": "pick_lift", "step": 20}, {"label": "transport", "step": 30},
+          {"label": "lower", "step": 50}, {"label": "open", "step": 60}]
+
+
+@pytest.mark.parametrize("release, step, category", [
+    (0.05, 40, "placement_failure"),  # in transit, but over the reference already
+    (0.3, 40, "grasp_failure"),  # in transit, far from it: a drop in transit
+    (0.3, 25, "grasp_failure"),
+    (0.101, 55, "placement_failure"),  # while lowering over a place 10 cm off: a placement
+    (0.3, 62, "placement_failure"),
+])
+def test_a_drop_while_placing_or_near_the_reference_is_a_placement_failure_in_transit_a_grasp_failure(
+        release, step, category):
+    rows = [row(0, "dropped", step=step, release=release, changes=[change("bowl_1", 0.12)])]
+    rows[0]["phases"] = PHASES
     t = derive("k", rows, META)
     assert (t.category, t.level) == (category, "L3")
 

@@ -68,9 +68,10 @@ class ScriptedPolicy:
 
     def _start(self, env) -> tuple[Ctx, Plan]:
         """The episode's context and plan, made on the first `act` from the live scene."""
-        noise = Noise(self.cfg.noise, episode_rng(self._seed, self._task_id or env.task.task_id))
+        levels = self.cfg.noise_for(env.task.suite)
+        noise = Noise(levels, episode_rng(self._seed, self._task_id or env.task.task_id))
         scene = Scene(env)
-        truth = TruthLog(scene, self.cfg.noise.action_noise, noise.speed)
+        truth = TruthLog(scene, levels.action_noise, noise.speed)
         ctx = Ctx(scene=scene, noise=noise, max_attempts=self.cfg.max_attempts, truth=truth)
         return ctx, plan_episode(ctx)
 
