@@ -8,7 +8,7 @@ one reported in the README (seed 1 init states 2-3, seed 2 init state 4).
 
 Terms: "closed" = gripper command > 0; a "close" is a run of closed steps, runs apart by
 fewer than `merge_gap` open steps merged (the command flickering while the hand still
-descends is one close); a "hold" is a run of >= `hold_steps` states with the object
+descends is one close), starting at its first run of >= `min_run` closed steps; a "hold" is a run of >= `hold_steps` states with the object
 grasped, runs apart by fewer than `min_run` states merged (shorter runs are fingers
 brushing or pinching it); "targets" = objects the goal
 moves, "references" = what the goal puts them on/in or operates, "operated" = fixtures an
@@ -155,7 +155,17 @@ def unlifted_slip(ev: Evidence, th: Thresholds, s: int, e: int, obj: str) -> boo
 
 
 def closes(ev: Evidence, th: Thresholds) -> list[tuple[int, int]]:
-    return [(s, e) for s, e in _merged(ev.gripper_command > 0, th.merge_gap) if e - s >= th.min_run]
+    """Closes, each from its first closed run of >= `min_run` steps: one-step twitches of the
+    command before it (a hand that closes early in steps while its descent is blocked) are
+    part of the close but not its start; a close made only of twitches starts at the first."""
+    closed = ev.gripper_command > 0
+    out = []
+    for s, e in _merged(closed, th.merge_gap):
+        if e - s < th.min_run:
+            continue
+        held = [a for a, b in _runs(closed[s:e]) if b - a >= th.min_run]
+        out.append((s + int(held[0]) if held else s, e))
+    return out
 
 
 def grasp_missed(ev: Evidence, th: Thresholds) -> list[SimEvent]:

@@ -32,6 +32,18 @@ def test_a_one_step_gripper_flicker_is_not_a_grasp_attempt():
     assert grasp_missed(ev, TH) == []
 
 
+def test_a_missed_grasp_starts_at_the_held_close_not_at_the_twitches_before_it():
+    # the generator's early close switches on one step at a time while a blocked descent
+    # keeps re-predicting its arrival (watched: 81, 84, 88, ... then closed from 112)
+    ev = make_evidence()
+    ev.per_object["eef_distance"]["bowl_1"][:] = 0.05
+    for s in (10, 13, 17, 20, 24):
+        ev.gripper_command[s] = 1.0
+    ev.gripper_command[28:45] = 1.0
+    [e] = grasp_missed(ev, TH)
+    assert e.step == 28
+
+
 def test_a_close_far_from_every_object_is_not_a_missed_grasp():
     ev = make_evidence()
     ev.gripper_command[20:40] = 1.0
