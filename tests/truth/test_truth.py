@@ -184,3 +184,34 @@ def test_an_episode_the_localizer_cannot_run_on_is_set_aside_as_a_miss_with_the_
     assert aside["pred_step"] is None and aside["reason"].startswith("set aside: KeyError") and "no_such_task" in aside["reason"]
     assert by_key[eps["miss"].key]["pred_step"] is not None  # the other episode goes on
     assert len(list((tmp_path / "bench" / "_done").glob("*.done"))) == 1  # no marker: tried again next time
+
+
+@pytest.mark.sim
+def test_a_handle_that_slips_out_mid_pull_is_let_go_where_the_fingers_left_it(tmp_path):
+    """A drawer pull whose handle slipped out of the fingers 9 steps into the pull (found on a
+    tuning run: libero_90, init state 4, default noise): the onset is the first state without
+    the fingers on the cabinet, not the skill's own let-go 50 steps later."""
+    from pipeline.config import Config, load_config
+    from pipeline.policies.scripted import ScriptedPolicy
+    from pipeline.sim import build_env, get_task
+    from pipeline.stage1.units import EpisodeUnit
+    from pipeline.stage1.worker import run_one
+
+    suite, task = "libero_90", "KITCHEN_SCENE1_open_the_top_drawer_of_the_cabinet"
+    raw = load_config("configs/default.yaml").model_dump()
+    raw["run"]["output_dir"] = str(tmp_path)
+    raw["stage1"]["rollout"]["horizon"] = 240
+    raw["stage1"]["video"]["render"] = "none"
+    cfg = Config.model_validate(raw)
+    env = build_env(get_task(suite, task))
+    try:
+        rec = run_one(env, ScriptedPolicy(cfg.stage1.policy.scripted), EpisodeUnit(suite, task, 0, 4, 631111876, "scripted"),
+                      cfg, tmp_path / "stage1")
+    finally:
+        env.close()
+    rows, _ = read_truth(tmp_path / "stage1" / rec.path / "truth.parquet")
+    first = rows[0]
+    skill_let_go = min(p["step"] for p in first["phases"] if p["label"] == "let_go")
+    assert (first["outcome"], first["event"]) == ("half_open", "let_go")
+    pull = min(p["step"] for p in first["phases"] if p["label"] == "pull")
+    assert pull < first["event_step"] < skill_let_go - 20

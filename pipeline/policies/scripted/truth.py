@@ -34,7 +34,9 @@ runs, or a pinch lost before the lift, are fingers brushing it.
   shut) is knocked too; event `undo`, the first state of the run in which it stopped
   holding, object the conjunct's first argument.
 - half_open / not_turned: a drawer/door/knob attempt ended without its conjunct; event
-  `let_go`, the step the hand stopped operating the part.
+  `let_go`, the step the hand stopped operating the part: the first state in which no
+  finger touched the part any more (a handle that slipped out of the fingers mid-pull), or
+  the skill's own let-go when that came first or the fingers never touched it.
 - timeout: the episode ended inside the attempt before anything above happened; event
   `timeout`, the attempt's start. (An attempt the episode ended inside whose conjunct holds
   is `achieved`: the runner stops at success before the skill looks.)
@@ -183,6 +185,7 @@ class TruthLog:
         self.eef: list[np.ndarray] = []  # grip site in state row t
         self.goal = [tuple(c) for c in env.goal]
         self.sat: list[tuple[bool, ...]] = []  # which goal conjuncts hold in state row t
+        self.touch: list[frozenset[str]] = []  # owners other than objects the fingers touch in row t
         self._start()
 
     @_safe
@@ -194,15 +197,16 @@ class TruthLog:
         poses = self.scene.env.object_poses()
         self.pos.append(np.array([poses[o][0] for o in self.objects]).reshape(-1, 3))
         self.quat.append(np.array([poses[o][1] for o in self.objects]).reshape(-1, 4))
-        self.held.append(self._in_hand())
+        left, right = self.scene.env.finger_contacts()
+        self.held.append(self._in_hand(left, right))
+        self.touch.append(frozenset((left | right) - set(self.objects)))
         self.eef.append(np.array(self.scene.eef()))
         ok = dict(self.scene.env.goal_conjuncts())
         self.sat.append(tuple(bool(ok.get(c, False)) for c in self.goal))
 
-    def _in_hand(self) -> str:
+    def _in_hand(self, left: set[str], right: set[str]) -> str:
         """The object between the fingers: touched by both, or by one while lifted >=
         LIFT_HELD_M above where the episode found it (a pinch on one pad still carries it)."""
-        left, right = self.scene.env.finger_contacts()
         both = [o for o in self.objects if o in left and o in right]
         if both:
             return both[0]
@@ -251,7 +255,7 @@ class TruthLog:
         a.end, a.outcome, a.detail = self.step, outcome, detail
         if outcome in (Outcome.HALF_OPEN, Outcome.NOT_TURNED):
             steps = [s for lab, s in a.phases if lab in ("let_go", "back_off", "retreat")]
-            a.event, a.event_step = "let_go", (min(steps) if steps else a.start)
+            a.event, a.event_step = "let_go", self._let_go(a, min(steps) if steps else a.start)
 
     @_safe
     def end_hand(self, obj: str, satisfied: bool) -> None:
@@ -373,6 +377,15 @@ class TruthLog:
                         "held": self.held[b_row] == o, "position": self.pos[b_row][i].astype(np.float32).tolist()})
         return out
 
+    def _let_go(self, a: Attempt, skill_let_go: int) -> int:
+        """When the hand stopped operating the part: the first state after the fingers' last
+        touch of it within the attempt, unless the skill let go before that."""
+        env = self.scene.env
+        name = a.conjunct[1] if len(a.conjunct) > 1 else a.target
+        part = env.region(name).parent if env.is_region(name) else name
+        touched = [r for r in range(a.start, min(skill_let_go, len(self.touch) - 1) + 1) if part in self.touch[r]]
+        return min(skill_let_go, touched[-1] + 1) if touched else skill_let_go
+
     def _unfinished(self, a: Attempt, last: int) -> None:
         """An attempt the episode ended inside (or that stopped without a verdict)."""
         if self.scene.satisfied(a.conjunct):
@@ -380,7 +393,8 @@ class TruthLog:
         elif a.skill in ("open", "close", "turn_on", "turn_off") and \
                 any(lab in ("let_go", "back_off", "retreat") for lab, _ in a.phases):
             a.outcome = Outcome.HALF_OPEN if a.skill in ("open", "close") else Outcome.NOT_TURNED
-            a.event, a.event_step = "let_go", min(s for lab, s in a.phases if lab in ("let_go", "back_off", "retreat"))
+            a.event, a.event_step = "let_go", self._let_go(
+                a, min(s for lab, s in a.phases if lab in ("let_go", "back_off", "retreat")))
         else:
             a.outcome, a.event, a.event_step = Outcome.TIMEOUT, "timeout", a.start
         if a.end is None:
