@@ -215,3 +215,15 @@ def test_a_handle_that_slips_out_mid_pull_is_let_go_where_the_fingers_left_it(tm
     assert (first["outcome"], first["event"]) == ("half_open", "let_go")
     pull = min(p["step"] for p in first["phases"] if p["label"] == "pull")
     assert pull < first["event_step"] < skill_let_go - 20
+
+
+def test_a_part_skill_lets_go_after_its_preamble_not_at_the_back_off_that_freed_the_hand():
+    from pipeline.policies.scripted.truth import skill_let_go
+
+    # libero_90 KITCHEN_SCENE4, init 4: the second attempt opened its hand first (release,
+    # back_off), pulled from 363 and let go at 427; the old rule took the preamble's 208
+    phases = [("release", 196), ("back_off", 208), ("lift", 223), ("transport", 235), ("tilt", 257),
+              ("grip_handle", 349), ("pull", 363), ("let_go", 427), ("back_off", 435)]
+    assert skill_let_go(phases, 0) == 427
+    assert skill_let_go([("face_drawer", 10), ("push", 30), ("back_off", 60), ("retreat", 70)], 0) == 60
+    assert skill_let_go([("release", 0), ("back_off", 12), ("tilt", 20)], None) is None

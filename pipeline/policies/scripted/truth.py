@@ -34,9 +34,10 @@ runs, or a pinch lost before the lift, are fingers brushing it.
   shut) is knocked too; event `undo`, the first state of the run in which it stopped
   holding, object the conjunct's first argument.
 - half_open / not_turned: a drawer/door/knob attempt ended without its conjunct; event
-  `let_go`, the step the hand stopped operating the part: the first state in which no
-  finger touched the part any more (a handle that slipped out of the fingers mid-pull), or
-  the skill's own let-go when that came first or the fingers never touched it.
+  `let_go`, the step the hand stopped operating the part: the first state after the
+  fingers' last touch of it since they closed on it (a handle that slipped out mid-pull),
+  or the skill's own let-go (its first let-go phase after the preamble that freed the hand)
+  when that came first or the closed fingers never touched it.
 - timeout: the episode ended inside the attempt before anything above happened; event
   `timeout`, the attempt's start. (An attempt the episode ended inside whose conjunct holds
   is `achieved`: the runner stops at success before the skill looks.)
@@ -165,6 +166,20 @@ def _safe(method):
     return wrapped
 
 
+LET_GO_PHASES = ("let_go", "back_off", "retreat")
+FREE_HAND_PHASES = ("release", "back_off")  # a skill's preamble: an empty hand opened and raised
+
+
+def skill_let_go(phases: list[tuple[str, int]], default: int | None) -> int | None:
+    """The step a part skill let go of its part: its first let-go phase after the preamble
+    (the preamble's own back-off frees the hand before the part is approached)."""
+    k = 0
+    while k < len(phases) and phases[k][0] in FREE_HAND_PHASES:
+        k += 1
+    steps = [s for lab, s in phases[k:] if lab in LET_GO_PHASES]
+    return min(steps) if steps else default
+
+
 class TruthLog:
     """Attempts and a per-step privileged trace of one episode (see the module docstring)."""
 
@@ -254,8 +269,7 @@ class TruthLog:
             return
         a.end, a.outcome, a.detail = self.step, outcome, detail
         if outcome in (Outcome.HALF_OPEN, Outcome.NOT_TURNED):
-            steps = [s for lab, s in a.phases if lab in ("let_go", "back_off", "retreat")]
-            a.event, a.event_step = "let_go", self._let_go(a, min(steps) if steps else a.start)
+            a.event, a.event_step = "let_go", self._let_go(a, skill_let_go(a.phases, a.start))
 
     @_safe
     def end_hand(self, obj: str, satisfied: bool) -> None:
@@ -379,22 +393,22 @@ class TruthLog:
 
     def _let_go(self, a: Attempt, skill_let_go: int) -> int:
         """When the hand stopped operating the part: the first state after the fingers' last
-        touch of it within the attempt, unless the skill let go before that."""
+        touch of it since they closed on it (a handle slipping out mid-pull), else the skill's
+        own let-go (fingers that closed on air pulled nothing until then)."""
         env = self.scene.env
         name = a.conjunct[1] if len(a.conjunct) > 1 else a.target
         part = env.region(name).parent if env.is_region(name) else name
-        touched = [r for r in range(a.start, min(skill_let_go, len(self.touch) - 1) + 1) if part in self.touch[r]]
+        grip = min([s for lab, s in a.phases if lab.startswith("grip")], default=a.start)
+        touched = [r for r in range(grip, min(skill_let_go, len(self.touch) - 1) + 1) if part in self.touch[r]]
         return min(skill_let_go, touched[-1] + 1) if touched else skill_let_go
 
     def _unfinished(self, a: Attempt, last: int) -> None:
         """An attempt the episode ended inside (or that stopped without a verdict)."""
         if self.scene.satisfied(a.conjunct):
             a.outcome = Outcome.ACHIEVED  # the goal check ended the episode before the skill looked
-        elif a.skill in ("open", "close", "turn_on", "turn_off") and \
-                any(lab in ("let_go", "back_off", "retreat") for lab, _ in a.phases):
+        elif a.skill in ("open", "close", "turn_on", "turn_off") and skill_let_go(a.phases, None) is not None:
             a.outcome = Outcome.HALF_OPEN if a.skill in ("open", "close") else Outcome.NOT_TURNED
-            a.event, a.event_step = "let_go", self._let_go(
-                a, min(s for lab, s in a.phases if lab in ("let_go", "back_off", "retreat")))
+            a.event, a.event_step = "let_go", self._let_go(a, skill_let_go(a.phases, a.start))
         else:
             a.outcome, a.event, a.event_step = Outcome.TIMEOUT, "timeout", a.start
         if a.end is None:
