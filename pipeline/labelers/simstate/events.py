@@ -8,7 +8,8 @@ one reported in the README (seed 1 init states 2-3, seed 2 init state 4).
 
 Terms: "closed" = gripper command > 0; a "close" is a run of closed steps, runs apart by
 fewer than `merge_gap` open steps merged (the command flickering while the hand still
-descends is one close), starting at its first run of >= `min_run` closed steps; a "hold" is a run of >= `hold_steps` states with the object
+descends is one close), starting at its first run of >= `min_run` closed steps (twitches
+alone are no close); a "hold" is a run of >= `hold_steps` states with the object
 grasped, runs apart by fewer than `min_run` states merged (shorter runs are fingers
 brushing or pinching it); "targets" = objects the goal
 moves, "references" = what the goal puts them on/in or operates, "operated" = fixtures an
@@ -31,8 +32,8 @@ Rules:
   before the next hold begins (a release into a basket that lands there is a placement).
   Step: the open command that released it (if within `grasp_window` steps before), else
   the release.
-- object_misplaced: a hold of a target ends after an open command (within `grasp_window`
-  steps before the hold ends) and is no drop (it was set down on something, or fell less
+- object_misplaced: a hold of a target that raised it >= `lift_m` ends after an open command
+  (within `grasp_window` steps before the hold ends) and is no drop (it was set down on something, or fell less
   than `drop_m`), and goal progress does not rise (as for a drop) within 2 * `drop_window`
   steps nor before the next hold begins: the target was let go where the goal does not
   want it. Step: that open command (the release at the wrong place).
@@ -157,14 +158,13 @@ def unlifted_slip(ev: Evidence, th: Thresholds, s: int, e: int, obj: str) -> boo
 def closes(ev: Evidence, th: Thresholds) -> list[tuple[int, int]]:
     """Closes, each from its first closed run of >= `min_run` steps: one-step twitches of the
     command before it (a hand that closes early in steps while its descent is blocked) are
-    part of the close but not its start; a close made only of twitches starts at the first."""
+    part of the close but not its start, and twitches alone close no gripper."""
     closed = ev.gripper_command > 0
     out = []
     for s, e in _merged(closed, th.merge_gap):
-        if e - s < th.min_run:
-            continue
         held = [a for a, b in _runs(closed[s:e]) if b - a >= th.min_run]
-        out.append((s + int(held[0]) if held else s, e))
+        if held:
+            out.append((s + int(held[0]), e))
     return out
 
 
@@ -212,7 +212,9 @@ def grasp_lost_and_dropped(ev: Evidence, th: Thresholds) -> list[SimEvent]:
                            detail=f"released unsupported, fell {fell:.3f} m"))
         elif closed[e - 1] and closed[e]:
             out.append(_ev(ev, e, "grasp_lost", obj, detail="slipped out of the closed gripper"))
-        elif opens and obj in ev.targets and not progressed:
+        elif opens and obj in ev.targets and not progressed and float(lift[s:e].max() - lift[s]) >= th.lift_m:
+            # (a set-down needs a pick-up: fingers touching a target they never raised, then
+            # opening, placed nothing)
             out.append(_ev(ev, opens[-1], EventKind.object_misplaced, obj,
                            detail=f"released and set down (fell {fell:.3f} m), goal progress unchanged"))
     return out

@@ -44,6 +44,14 @@ def test_a_missed_grasp_starts_at_the_held_close_not_at_the_twitches_before_it()
     assert e.step == 28
 
 
+def test_twitches_alone_are_no_close():
+    ev = make_evidence()
+    ev.per_object["eef_distance"]["bowl_1"][:] = 0.05
+    for s in range(10, 40, 3):  # one closed step in three, never held: the gripper never closes
+        ev.gripper_command[s] = 1.0
+    assert grasp_missed(ev, TH) == []
+
+
 def test_a_close_far_from_every_object_is_not_a_missed_grasp():
     ev = make_evidence()
     ev.gripper_command[20:40] = 1.0
@@ -78,7 +86,7 @@ def test_a_one_state_touch_after_the_release_does_not_hide_the_release():
     ev.gripper_command[10:40] = 1.0
     ev.grasped[12:42] = ["bowl_1"] * 30
     ev.grasped[43] = "bowl_1"  # a finger brushes it once as it settles
-    ev.per_object["lift"]["bowl_1"][12:42] = 0.05
+    ev.per_object["lift"]["bowl_1"][16:38] = 0.05
     for t in range(44, 60):
         ev.contacts[t] = ["bowl_1|table"]
     [e] = grasp_lost_and_dropped(ev, TH)
@@ -109,11 +117,20 @@ def test_a_target_set_down_without_goal_progress_is_misplaced_at_the_open_comman
     ev = make_evidence()
     ev.gripper_command[10:40] = 1.0
     ev.grasped[12:42] = ["bowl_1"] * 30
-    ev.per_object["lift"]["bowl_1"][12:42] = 0.05
+    ev.per_object["lift"]["bowl_1"][16:38] = 0.05  # picked up, carried, set down
     for t in range(38, 60):
         ev.contacts[t] = ["bowl_1|table"]  # set down beside the plate: supported, no fall
     [e] = grasp_lost_and_dropped(ev, TH)
     assert (e.kind, e.step, e.object) == ("object_misplaced", 40, "bowl_1")
+
+
+def test_fingers_that_open_on_a_target_they_never_raised_misplaced_nothing():
+    ev = make_evidence()
+    ev.gripper_command[10:40] = 1.0
+    ev.grasped[12:42] = ["bowl_1"] * 30  # between the fingers on the table, never lifted
+    for t in range(0, 60):
+        ev.contacts[t] = ["bowl_1|table"]
+    assert grasp_lost_and_dropped(ev, TH) == []
 
 
 def test_a_non_target_set_down_anywhere_is_no_misplacement():
@@ -251,6 +268,7 @@ def test_a_goal_predicate_flickering_true_once_after_a_release_is_no_placement()
     ev = make_evidence()
     ev.gripper_command[10:40] = 1.0
     ev.grasped[12:42] = ["bowl_1"] * 30
+    ev.per_object["lift"]["bowl_1"][16:38] = 0.05
     for t in range(42, 60):
         ev.contacts[t] = ["bowl_1|table"]
     ev.goal_progress[45] = 1.0  # one state
