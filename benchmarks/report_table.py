@@ -41,7 +41,8 @@ def figures(run: Path) -> dict:
     out: dict = {"episodes": len(episodes), "failed": sum(not e.success for e in episodes),
                  "failed_by_suite": {s: [sum(not e.success for e in episodes if e.suite == s),
                                          sum(e.suite == s for e in episodes)] for s in suites}}
-    scenes = pq.read_table(run / "release" / "scenarios.parquet").to_pylist()
+    manifest = run / "release" / "scenarios.parquet"
+    scenes = pq.read_table(manifest).to_pylist() if manifest.is_file() else []  # not released: no scenes
     out["scenes"] = len(scenes)
     out["certified"] = sum(bool(r["certified"]) for r in scenes)
     for dim, key in (("level", "level"), ("suite", "suite")):
@@ -93,8 +94,9 @@ def rows(figs: list[dict]) -> list[tuple[str, list[str]]]:
 def aims_met(f: dict) -> dict[str, bool]:
     lv = f["certified_by_level"]
     loc = f["localize"]
-    return {"certified": f["scenes"] > 0 and f["certified"] / f["scenes"] >= AIM_CERT,
-            "certified per level": all(c / n >= AIM_CERT_LEVEL for c, n in lv.values() if n >= AIM_LEVEL_MIN_SCENES),
+    released = {"certified": f["scenes"] > 0 and f["certified"] / f["scenes"] >= AIM_CERT,
+                "certified per level": all(c / n >= AIM_CERT_LEVEL for c, n in lv.values() if n >= AIM_LEVEL_MIN_SCENES)}
+    return {**(released if f["scenes"] else {}),
             **{k: (loc[k] or 0) >= AIM_LOCALIZE for k in ("within_1s", "category_accuracy", "level_accuracy")}}
 
 
