@@ -290,19 +290,18 @@ def progress(s: Session, user: User, tolerance_s: float, control_hz: int = 20) -
     }
 
 
-_MEDIA_PATH: dict = {}  # kind -> its statement, built once
+TABLES = ("evidence", "frames")  # the tables an item's context may name
+_TABLE_PATHS = (select(*(Item.context[kind].as_string() for kind in TABLES))
+                .where(Item.id == bindparam("item_id")))  # built once (see `_REVIEWER_ROW`)
 
 
-def media_path(s: Session, item_id: int, kind: str) -> str:
-    """The path (under the run folder) of an item's `kind` table ("evidence", "frames"), ""
-    if it has none; read alone, not with the rest of the item (404 if there is no item)."""
-    stmt = _MEDIA_PATH.get(kind)
-    if stmt is None:
-        stmt = _MEDIA_PATH[kind] = select(Item.context[kind].as_string()).where(Item.id == bindparam("item_id"))
-    row = s.execute(stmt, {"item_id": item_id}).first()
+def table_paths(s: Session, item_id: int) -> dict[str, str]:
+    """The paths (under the run folder) of an item's tables, kind -> path ("" if it has none),
+    read alone, not with the rest of the item (404 if there is no item)."""
+    row = s.execute(_TABLE_PATHS, {"item_id": item_id}).first()
     if row is None:
         raise NotFound(f"no item {item_id}")
-    return row[0] or ""
+    return {kind: path or "" for kind, path in zip(TABLES, row)}
 
 
 def video_paths(s: Session) -> set[str]:
