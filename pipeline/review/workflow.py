@@ -34,7 +34,6 @@ from pipeline.review.fields import FieldError, agreement, edited_fields, resolve
 from pipeline.vocab import COLLECTING, Decision, ItemStatus, Resolution
 
 DECISIONS = tuple(d.value for d in Decision)
-NOT_COLLECTING = tuple(s for s in ItemStatus if s not in COLLECTING)
 
 
 @dataclass(frozen=True)
@@ -56,11 +55,8 @@ def get_item(s: Session, item_id: int, lock: bool = False) -> Item:
     return item
 
 
-def _active_leases(s: Session, item_id: int, t: float, exclude_user: int | None = None) -> int:
-    q = select(func.count(Lease.id)).where(Lease.item_id == item_id, Lease.expires_at > t)
-    if exclude_user is not None:
-        q = q.where(Lease.user_id != exclude_user)
-    return s.scalar(q) or 0
+def _active_leases(s: Session, item_id: int, t: float) -> int:
+    return s.scalar(select(func.count(Lease.id)).where(Lease.item_id == item_id, Lease.expires_at > t)) or 0
 
 
 def refresh_status(s: Session, item: Item, t: float | None = None, leased: bool | None = None) -> None:
