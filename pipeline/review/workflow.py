@@ -26,6 +26,7 @@ from typing import NamedTuple
 from sqlalchemy import Integer, and_, bindparam, delete, exists, func, select, update
 from sqlalchemy.engine import Engine
 from sqlalchemy.orm import Session, aliased
+from sqlalchemy.orm.attributes import set_committed_value
 
 from pipeline.review import audit, blindness
 from pipeline.review.db import IS_COLLECTING, Item, Lease, Review, User, now
@@ -46,10 +47,16 @@ class QueueSettings:
     lease_max_s: int = 3600  # a lease is never renewed past this long after it was taken
 
 
+# the item under its row lock, read afresh even if the session holds it (built once: `Session.get`
+# with a lock builds its statement on every call)
+_LOCKED_ITEM = (select(Item).where(Item.id == bindparam("item_id")).with_for_update()
+                .execution_options(populate_existing=True))
+
+
 def get_item(s: Session, item_id: int, lock: bool = False) -> Item:
     """The item (404 if none); `lock`: with its row lock (FOR UPDATE on PostgreSQL, where two
     transactions may otherwise check the same item at once; SQLite's writer is alone anyway)."""
-    item = s.get(Item, item_id, with_for_update=True if lock else None)
+    item = s.scalars(_LOCKED_ITEM, {"item_id": item_id}).first() if lock else s.get(Item, item_id)
     if item is None:
         raise NotFound(f"no item {item_id}")
     return item
@@ -286,6 +293,14 @@ def _same(r: Review, decision: str, values: dict | None, reason: str | None) -> 
     return r.decision == decision and r.values == values and (r.flag_reason or None) == ((reason or "").strip() or None)
 
 
+# a first review takes a place: never more than K (the condition), in one statement (built once)
+_ITEMS = Item.__table__
+_TAKE_PLACE = (update(_ITEMS)
+               .where(_ITEMS.c.id == bindparam("item_id"), _ITEMS.c.n_reviews < _ITEMS.c.required_reviews,
+                      _ITEMS.c.status.in_(COLLECTING))
+               .values(n_reviews=_ITEMS.c.n_reviews + 1, version=_ITEMS.c.version + 1, status=ItemStatus.reviewed))
+
+
 def submit_review(s: Session, user: User, item_id: int, body: dict, cfg: QueueSettings) -> tuple[Review, bool]:
     """Store a decision; return (the review, whether it was a harmless repeat)."""
     item = get_item(s, item_id, lock=True)
@@ -314,15 +329,13 @@ def submit_review(s: Session, user: User, item_id: int, body: dict, cfg: QueueSe
             # leases are honoured: without one, a reviewer may not take a place others hold
             raise Stale(f"item {item.id} is held by other reviewers; take the next item instead")
         # `item` was read under its row lock in this transaction (SQLite: the one writer), so
-        # the UPDATE's new counts are computed in memory too ("evaluate"), without a reload;
-        # the status a reviewed item has (`refresh_status`) is set by the same statement
-        took = s.execute(
-            update(Item).where(Item.id == item.id, Item.n_reviews < Item.required_reviews, Item.status.in_(COLLECTING))
-            .values(n_reviews=Item.n_reviews + 1, version=Item.version + 1, status=ItemStatus.reviewed),
-            execution_options={"synchronize_session": "evaluate"},
-        ).rowcount
-        if not took:
+        # the new counts are known without a reload, and set as the stored values; the status a
+        # reviewed item has (`refresh_status`) is set by the same statement
+        if not s.execute(_TAKE_PLACE, {"item_id": item.id}).rowcount:
             raise Stale(f"item {item.id} already has its {item.required_reviews} reviews")
+        for name, value in (("n_reviews", item.n_reviews + 1), ("version", item.version + 1),
+                            ("status", ItemStatus.reviewed)):
+            set_committed_value(item, name, value)
         mine = Review(item_id=item.id, reviewer_id=user.id, decision=decision, values=values, edited=edited,
                       flag_reason=reason, idempotency_key=key, version=1)
         s.add(mine)
