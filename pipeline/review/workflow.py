@@ -353,11 +353,14 @@ def submit_review(s: Session, user: User, item_id: int, body: dict, cfg: QueueSe
     return mine, False
 
 
+_REVIEW_VALUES = select(Review.values).where(Review.item_id == bindparam("item_id")).order_by(Review.id)  # built once
+
+
 def close(s: Session, item: Item, cfg: QueueSettings, actor: str) -> None:
     """All K reviews are in: final when every field agrees, else conflict on the disputed ones."""
-    reviews = s.scalars(select(Review).where(Review.item_id == item.id).order_by(Review.id)).all()
+    values = s.scalars(_REVIEW_VALUES, {"item_id": item.id}).all()
     hz = (item.context or {}).get("control_hz", cfg.control_hz)
-    agreed, disputed = agreement([r.values for r in reviews], cfg.time_tolerance_s, hz)
+    agreed, disputed = agreement(list(values), cfg.time_tolerance_s, hz)
     before = item.status
     item.agreed, item.disputed = agreed, disputed
     if disputed:
