@@ -38,7 +38,6 @@ from sqlalchemy import (
     UniqueConstraint,
     create_engine,
     event,
-    exc,
     literal,
     text,
 )
@@ -186,40 +185,15 @@ def make_engine(url: str, busy_timeout_ms: int = 10_000) -> Engine:
         path.parent.mkdir(parents=True, exist_ok=True)
         _private_files(path)
     kwargs: dict = {"pool_size": 32, "max_overflow": 16} if not sqlite or ":memory:" not in url else {}
+    if not sqlite:
+        kwargs["pool_pre_ping"] = True  # a team's server restarts; a dead pooled connection is replaced
     engine = create_engine(url, connect_args={"timeout": busy_timeout_ms / 1000} if sqlite else {}, **kwargs)
     if sqlite:
         _sqlite_setup(engine, busy_timeout_ms)
-    else:
-        _ping_when_idle(engine)
     from pipeline.review.migrations import upgrade
 
     upgrade(engine)
     return engine
-
-
-PING_IDLE_S = 5.0  # a pooled server connection idle this long is pinged before it is used
-
-
-def _ping_when_idle(engine: Engine) -> None:
-    """A team's server restarts: a dead pooled connection is replaced before a request uses it.
-
-    Unlike `pool_pre_ping`, only a connection idle for `PING_IDLE_S` is pinged, not every
-    checkout (a request checks out two: one to know its user, one for its work; pinging both
-    was a third of the statements sent). A connection that dies while in use fails its
-    statement, and SQLAlchemy then discards every connection of the pool made before it.
-    """
-    @event.listens_for(engine, "checkin")
-    def _idle_from(_dbapi_conn, record):
-        record.info["idle_since"] = time.monotonic()
-
-    @event.listens_for(engine, "checkout")
-    def _ping(dbapi_conn, record, _proxy):
-        if time.monotonic() - record.info.get("idle_since", 0.0) < PING_IDLE_S:
-            return
-        try:
-            engine.dialect.do_ping(dbapi_conn)
-        except Exception as e:  # the pool then opens a fresh connection in its place
-            raise exc.DisconnectionError(f"pooled connection is dead: {e}") from e
 
 
 def _private_files(path: Path) -> None:

@@ -149,9 +149,9 @@ def test_the_writer_gate_is_freed_by_commit_rollback_and_a_failed_begin(tmp_path
     engine.dispose()
 
 
-def test_a_pooled_postgresql_connection_killed_while_idle_is_replaced_before_use(pg_cluster, monkeypatch):
+def test_a_pooled_postgresql_connection_killed_while_idle_is_replaced_before_use(pg_cluster):
     """A team's server restarts while the review server idles: the next request still works
-    (`db._ping_when_idle`; PostgreSQL only, SQLite has no server)."""
+    (the pool pings a connection before handing it out; PostgreSQL only, SQLite has no server)."""
     from sqlalchemy import text
 
     from pipeline.review import db
@@ -162,7 +162,6 @@ def test_a_pooled_postgresql_connection_killed_while_idle_is_replaced_before_use
         db.ping(engine)  # a connection now sits in the pool
         pg_cluster._admin("SELECT pg_terminate_backend(pid) FROM pg_stat_activity "
                           f"WHERE datname = '{engine.url.database}' AND pid <> pg_backend_pid()")
-        monkeypatch.setattr(db, "PING_IDLE_S", 0.0)  # it has been idle long enough
         with engine.connect() as c:
             assert c.execute(text("SELECT 1")).scalar() == 1
     finally:
