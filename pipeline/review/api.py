@@ -113,7 +113,8 @@ def create_app(run_dir: str | Path, engine: Engine, settings: QueueSettings, ui_
     app.state.limits = limits  # the server's protocol takes its header limits from here (server.py)
     app.add_middleware(RequestLimits, limits=limits)  # before routing, authentication and parsing
     app.add_middleware(SecurityHeaders)  # outermost: the limits' answers get the headers too
-    for module in (session, queue, items, adjudication, admin, media):
+    # the routes of a reviewer's every item first: a request is matched against them in order
+    for module in (queue, items, media, session, adjudication, admin):
         app.include_router(module.router)
     if docs:
         app.include_router(admin.docs_router)

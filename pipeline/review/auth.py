@@ -23,7 +23,7 @@ import logging
 import secrets
 from dataclasses import dataclass
 
-from sqlalchemy import delete, select
+from sqlalchemy import bindparam, delete, select
 from sqlalchemy.engine import Engine
 from sqlalchemy.orm import Session
 
@@ -141,23 +141,38 @@ class Principal:
     csrf: str | None  # None when authenticated by bearer token
 
 
+# the acting person is read through a Core connection, not an ORM session: every request
+# asks this once (a session, its identity map and an ORM load cost more than the query)
+_PERSON = (User.id, User.name, User.role, User.token_hash, User.active, User.created_at)
+
+
+_BY_TOKEN = select(*_PERSON).where(User.token_hash == bindparam("token_hash"))  # built once (`workflow`)
+_BY_SESSION = (select(WebSession.expires_at.label("session_expires_at"), WebSession.csrf, *_PERSON)
+               .select_from(WebSession).outerjoin(User, User.id == WebSession.user_id)
+               .where(WebSession.id_hash == bindparam("id_hash")))
+
+
+def _person(row) -> User:
+    """A transient `User` of a row of `_PERSON` (never added to a session: read only)."""
+    return User(id=row.id, name=row.name, role=row.role, token_hash=row.token_hash, active=row.active,
+                created_at=row.created_at)
+
+
 def authenticate(engine: Engine, method: str, bearer: str | None, cookie: str | None, csrf: str | None) -> Principal:
     """The acting user of a request; raises 401 (who are you) or 403 (CSRF)."""
-    with read_session(engine) as s:
+    with engine.connect() as c:
         if bearer:
-            user = user_by_token(s, bearer)
-            if user is None:
+            row = c.execute(_BY_TOKEN, {"token_hash": hash_token(bearer)}).first()
+            if row is None or not row.active:
                 raise Unauthorized("unknown or disabled token")
-            return Principal(user, None)
+            return Principal(_person(row), None)
         if not cookie:
             raise Unauthorized("sign in first")
-        row = s.execute(select(WebSession, User).outerjoin(User, User.id == WebSession.user_id)
-                        .where(WebSession.id_hash == hash_token(cookie))).first()
-    if row is None or row[0].expires_at <= now():
+        row = c.execute(_BY_SESSION, {"id_hash": hash_token(cookie)}).first()
+    if row is None or row.session_expires_at <= now():
         raise Unauthorized("session expired; sign in again")
-    session, user = row
-    if user is None or not user.active:
+    if row.id is None or not row.active:
         raise Unauthorized("account disabled")
-    if method not in SAFE_METHODS and not (csrf and hmac.compare_digest(csrf, session.csrf)):
+    if method not in SAFE_METHODS and not (csrf and hmac.compare_digest(csrf, row.csrf)):
         raise Forbidden("missing or wrong CSRF token (X-CSRF-Token)")
-    return Principal(user, session.csrf)
+    return Principal(_person(row), row.csrf)

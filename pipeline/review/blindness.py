@@ -22,7 +22,7 @@ Export writes final items only, so it never shows a collecting item's reviews.
 
 from __future__ import annotations
 
-from sqlalchemy import and_, exists, select
+from sqlalchemy import ColumnElement, and_, exists, select
 from sqlalchemy.orm import Session, aliased
 
 from pipeline.review import audit
@@ -40,9 +40,11 @@ def closed():
     return Item.status.not_in(COLLECTING) & ~exists().where(other.key == Item.key, other.status.in_(COLLECTING))
 
 
-def has_read(user: User):
-    """SQL condition: `user` has read the reviews of this item's episode."""
-    return exists().where(and_(Event.kind == READ_REVIEWS, Event.actor == user.name, Event.item_key == Item.key))
+def has_read(actor: User | ColumnElement):
+    """SQL condition: `actor` (a user, or an SQL expression of a user's name, e.g. a bound
+    parameter of a statement built once) has read the reviews of this item's episode."""
+    name = actor.name if isinstance(actor, User) else actor
+    return exists().where(and_(Event.kind == READ_REVIEWS, Event.actor == name, Event.item_key == Item.key))
 
 
 def refuse_read(s: Session, user: User, item: Item, whole_episode: bool) -> None:
@@ -73,8 +75,11 @@ def open_reviews(s: Session, user: User, item_id: int, whole_episode: bool = Fal
     return item
 
 
-def refuse_write(s: Session, user: User, item: Item) -> None:
+def refuse_write(s: Session, user: User, item: Item, read: bool | None = None) -> None:
     """Stale (409) if `user` has read the reviews of `item`'s episode: checked on every lease
-    and every decision, a first one or a change."""
-    if s.scalar(select(Item.id).where(Item.id == item.id, has_read(user))):
+    and every decision, a first one or a change (`read`: `has_read` already asked, in the
+    caller's own statement; None: asked here)."""
+    if read is None:
+        read = s.scalar(select(Item.id).where(Item.id == item.id, has_read(user))) is not None
+    if read:
         raise Stale(f"you have read the reviews of item {item.id}'s episode; it needs reviewers who have not")

@@ -12,7 +12,7 @@ from __future__ import annotations
 import threading
 from collections import OrderedDict
 
-from sqlalchemy import func, select
+from sqlalchemy import and_, bindparam, func, select
 from sqlalchemy.orm import Session, defer
 
 from pipeline.review import blindness
@@ -99,9 +99,22 @@ def _build_base(item: Item) -> dict:
     }
 
 
-def reviewer_view(s: Session, item: Item, user: User) -> dict:
-    mine = s.scalar(select(Review).where(Review.item_id == item.id, Review.reviewer_id == user.id))
-    lease = s.scalar(select(Lease).where(Lease.item_id == item.id, Lease.user_id == user.id))
+# built once, values bound per call (see `workflow._STANDING`)
+_REVIEWER_ROW = (
+    select(Item, Review, Lease)
+    .outerjoin(Review, and_(Review.item_id == Item.id, Review.reviewer_id == bindparam("user_id")))
+    .outerjoin(Lease, and_(Lease.item_id == Item.id, Lease.user_id == bindparam("user_id")))
+    .where(Item.id == bindparam("item_id"))
+)
+
+
+def reviewer_view(s: Session, item_id: int, user: User) -> dict:
+    """Item `item_id` as `user` reviews it (404 if there is none): the item, their own review
+    and their lease, read in one statement (each is unique per (item, person))."""
+    row = s.execute(_REVIEWER_ROW, {"user_id": user.id, "item_id": item_id}).first()
+    if row is None:
+        raise NotFound(f"no item {item_id}")
+    item, mine, lease = row
     t = now()
     out = {**_base(item)}
     out["state"] = "open" if item.status in COLLECTING else "closed"
@@ -277,13 +290,18 @@ def progress(s: Session, user: User, tolerance_s: float, control_hz: int = 20) -
     }
 
 
-def media_path(s: Session, item_id: int, kind: str) -> str:
-    """The path (under the run folder) of an item's `kind` table ("evidence", "frames"), ""
-    if it has none; read alone, not with the rest of the item (404 if there is no item)."""
-    row = s.execute(select(Item.context[kind].as_string()).where(Item.id == item_id)).first()
+TABLES = ("evidence", "frames")  # the tables an item's context may name
+_TABLE_PATHS = (select(*(Item.context[kind].as_string() for kind in TABLES))
+                .where(Item.id == bindparam("item_id")))  # built once (see `_REVIEWER_ROW`)
+
+
+def table_paths(s: Session, item_id: int) -> dict[str, str]:
+    """The paths (under the run folder) of an item's tables, kind -> path ("" if it has none),
+    read alone, not with the rest of the item (404 if there is no item)."""
+    row = s.execute(_TABLE_PATHS, {"item_id": item_id}).first()
     if row is None:
         raise NotFound(f"no item {item_id}")
-    return row[0] or ""
+    return {kind: path or "" for kind, path in zip(TABLES, row)}
 
 
 def video_paths(s: Session) -> set[str]:

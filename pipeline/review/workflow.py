@@ -21,19 +21,20 @@ Invariants:
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
-from sqlalchemy import and_, delete, exists, func, select, update
+from sqlalchemy import Integer, and_, bindparam, delete, exists, func, select, update
 from sqlalchemy.engine import Engine
-from sqlalchemy.orm import Session
+from sqlalchemy.orm import Session, aliased
+from sqlalchemy.orm.attributes import set_committed_value
 
 from pipeline.review import audit, blindness
-from pipeline.review.db import Item, Lease, Review, User, now
+from pipeline.review.db import IS_COLLECTING, Item, Lease, Review, User, now
 from pipeline.review.errors import Invalid, NotFound, Stale
 from pipeline.review.fields import FieldError, agreement, edited_fields, resolve
 from pipeline.vocab import COLLECTING, Decision, ItemStatus, Resolution
 
 DECISIONS = tuple(d.value for d in Decision)
-NOT_COLLECTING = tuple(s for s in ItemStatus if s not in COLLECTING)
 
 
 @dataclass(frozen=True)
@@ -46,28 +47,36 @@ class QueueSettings:
     lease_max_s: int = 3600  # a lease is never renewed past this long after it was taken
 
 
+# the item under its row lock, read afresh even if the session holds it (built once: `Session.get`
+# with a lock builds its statement on every call)
+_LOCKED_ITEM = (select(Item).where(Item.id == bindparam("item_id")).with_for_update()
+                .execution_options(populate_existing=True))
+
+
 def get_item(s: Session, item_id: int, lock: bool = False) -> Item:
     """The item (404 if none); `lock`: with its row lock (FOR UPDATE on PostgreSQL, where two
     transactions may otherwise check the same item at once; SQLite's writer is alone anyway)."""
-    item = s.get(Item, item_id, with_for_update=True if lock else None)
+    item = s.scalars(_LOCKED_ITEM, {"item_id": item_id}).first() if lock else s.get(Item, item_id)
     if item is None:
         raise NotFound(f"no item {item_id}")
     return item
 
 
-def _active_leases(s: Session, item_id: int, t: float, exclude_user: int | None = None) -> int:
-    q = select(func.count(Lease.id)).where(Lease.item_id == item_id, Lease.expires_at > t)
-    if exclude_user is not None:
-        q = q.where(Lease.user_id != exclude_user)
-    return s.scalar(q) or 0
+def _active_leases(s: Session, item_id: int, t: float) -> int:
+    return s.scalar(select(func.count(Lease.id)).where(Lease.item_id == item_id, Lease.expires_at > t)) or 0
 
 
-def refresh_status(s: Session, item: Item, t: float | None = None) -> None:
-    """Recompute the status of an item that is still collecting reviews."""
+def refresh_status(s: Session, item: Item, t: float | None = None, leased: bool | None = None) -> None:
+    """Recompute the status of an item that is still collecting reviews (`leased`: whether a
+    live lease on it is known to exist; None: count them)."""
     if item.status not in COLLECTING:
         return
-    t = now() if t is None else t
-    item.status = ItemStatus.reviewed if item.n_reviews else (ItemStatus.leased if _active_leases(s, item.id, t) else ItemStatus.pending)
+    if item.n_reviews:
+        item.status = ItemStatus.reviewed
+        return
+    if leased is None:
+        leased = _active_leases(s, item.id, now() if t is None else t) > 0
+    item.status = ItemStatus.leased if leased else ItemStatus.pending
 
 
 def expire(s: Session, t: float | None = None) -> int:
@@ -97,29 +106,68 @@ def _reviewed_by(user_id: int):
     return exists().where(and_(Review.item_id == Item.id, Review.reviewer_id == user_id))
 
 
+class Standing(NamedTuple):
+    """What the rules ask about one person and one item, read in one statement (`standing`)."""
+    review: Review | None  # their review of it
+    lease: Lease | None  # their lease on it, live or expired
+    read: bool  # they read the reviews of its episode (`blindness`)
+    others: int  # live leases of other people on it
+    held: int  # live leases they hold, on any item
+
+
+# The hot statements are built once, their values bound per call (`:user_id`, `:actor` (the
+# user's name), `:t` (now), `:item_id`, ...): building a statement and its cache key cost
+# more than SQLAlchemy's compiled-statement cache saves.
+_UID, _T, _ACTOR = bindparam("user_id"), bindparam("t"), bindparam("actor")
+
+
+def _standing_stmt():
+    mine = aliased(Lease)  # the counts below are over all leases, not this joined row
+    others = (select(func.count(Lease.id)).where(Lease.item_id == Item.id, Lease.expires_at > _T,
+                                                 Lease.user_id != _UID).correlate(Item).scalar_subquery())
+    held = select(func.count(Lease.id)).where(Lease.user_id == _UID, Lease.expires_at > _T).correlate(None).scalar_subquery()
+    return (select(Review, mine, blindness.has_read(_ACTOR), others, held).select_from(Item)
+            .outerjoin(Review, and_(Review.item_id == Item.id, Review.reviewer_id == _UID))
+            .outerjoin(mine, and_(mine.item_id == Item.id, mine.user_id == _UID))
+            .where(Item.id == bindparam("item_id")))
+
+
+_STANDING = _standing_stmt()
+
+
+def _who(user: User, t: float) -> dict:
+    return {"user_id": user.id, "actor": user.name, "t": t}
+
+
+def standing(s: Session, user: User, item_id: int, t: float) -> Standing:
+    """`Standing` of `user` on item `item_id` at time `t` (one row: the review and the lease
+    are unique per (item, person))."""
+    row = s.execute(_STANDING, {**_who(user, t), "item_id": item_id}).one()
+    return Standing(row[0], row[1], bool(row[2]), row[3] or 0, row[4] or 0)
+
+
 def lease_item(s: Session, user: User, item: Item, cfg: QueueSettings) -> Lease:
     """Hold `item` for `user` for the lease time (renewing a lease they hold)."""
     t = now()
     if item.status not in COLLECTING:
         raise Stale(f"item {item.id} is {item.status}, not open for review", current={"status": item.status})
-    if s.scalar(select(Review.id).where(Review.item_id == item.id, Review.reviewer_id == user.id)):
+    st = standing(s, user, item.id, t)
+    if st.review is not None:
         raise Stale(f"you already reviewed item {item.id}")
-    blindness.refuse_write(s, user, item)
-    lease = s.scalar(select(Lease).where(Lease.item_id == item.id, Lease.user_id == user.id))
+    blindness.refuse_write(s, user, item, read=st.read)
+    lease = st.lease
     if lease is None or lease.expires_at <= t:
-        if item.n_reviews + _active_leases(s, item.id, t, exclude_user=user.id) >= item.required_reviews:
+        if item.n_reviews + st.others >= item.required_reviews:
             raise Stale(f"item {item.id} already has {item.required_reviews} reviewers")
-        held = s.scalar(select(func.count(Lease.id)).where(Lease.user_id == user.id, Lease.expires_at > t)) or 0
-        if held >= cfg.max_leases:
-            raise Stale(f"you already hold {held} items (at most {cfg.max_leases}); decide one of them first")
+        if st.held >= cfg.max_leases:
+            raise Stale(f"you already hold {st.held} items (at most {cfg.max_leases}); decide one of them first")
         if lease is None:
             lease = Lease(item_id=item.id, user_id=user.id)
             s.add(lease)
         lease.taken_at = t
         audit.record(s, user.name, "leased", item)
     lease.expires_at = min(t + cfg.lease_seconds, lease.taken_at + cfg.lease_max_s)
-    s.flush()
-    refresh_status(s, item, t)
+    refresh_status(s, item, t, leased=True)  # written with the lease, at the flush
     return lease
 
 
@@ -136,6 +184,32 @@ def sweep_due(s: Session | Engine, t: float) -> bool:
     return t - _last_sweep.get(_sweep_key(s), 0.0) >= SWEEP_EVERY_S
 
 
+_ORDER = (Item.quarantined, Item.n_reviews.desc(), Item.id)
+# the items the user holds, found from their leases (a handful), not by walking the items
+_HELD_ITEM = (
+    select(Item)
+    .where(Item.id.in_(select(Lease.item_id).where(Lease.user_id == _UID, Lease.expires_at > _T)),
+           Item.status.in_(COLLECTING), ~_reviewed_by(_UID), ~blindness.has_read(_ACTOR))
+    .order_by(Item.id).limit(1).with_for_update(of=Item)
+)
+# a page of the open items in queue order: the conditions below (correlated subqueries) then
+# run on a page, not on every open item of a long queue. The page is the first rows of the
+# partial index of open items (`db.IS_COLLECTING`, `ix_items_queue_open`), so neither a long
+# queue nor the items closed before it make it slower
+_PAGE = (select(Item.id).where(IS_COLLECTING).order_by(*_ORDER)
+         .limit(QUEUE_PAGE).offset(bindparam("offset", type_=Integer)).correlate(None))
+_LIVE_LEASES = select(func.count(Lease.id)).where(Lease.item_id == Item.id, Lease.expires_at > _T).scalar_subquery()
+# the first item of the page open to the user: room for them, not reviewed by them, not read
+_OPEN_TO_USER = (
+    select(Item)
+    .where(Item.id.in_(_PAGE), Item.status.in_(COLLECTING), Item.n_reviews + _LIVE_LEASES < Item.required_reviews,
+           ~_reviewed_by(_UID), ~blindness.has_read(_ACTOR), Item.id.not_in(bindparam("passed", expanding=True)))
+    .order_by(*_ORDER).limit(1)
+)
+_OPEN_SKIP = _OPEN_TO_USER.with_for_update(skip_locked=True, of=Item)
+_OPEN_WAIT = _OPEN_TO_USER.with_for_update(of=Item)
+
+
 def lease_next(s: Session, user: User, cfg: QueueSettings, tries: int = 8) -> Item | None:
     """The user's next item: one they already hold, else the fullest open item with room.
 
@@ -149,53 +223,33 @@ def lease_next(s: Session, user: User, cfg: QueueSettings, tries: int = 8) -> It
     if sweep_due(s, t):
         expire(s, t)
         _last_sweep[_sweep_key(s)] = t
-    # the items the user holds, found from their leases (a handful), not by walking the items
-    mine = s.scalars(select(Lease.item_id).where(Lease.user_id == user.id, Lease.expires_at > t)).all()
-    held = s.scalar(
-        select(Item).where(Item.id.in_(mine), Item.status.in_(COLLECTING), ~_reviewed_by(user.id),
-                           ~blindness.has_read(user))
-        .order_by(Item.id).limit(1).with_for_update(of=Item)
-    ) if mine else None
+    who = _who(user, t)
+    held = s.scalar(_HELD_ITEM, who)
     if held is not None:
         lease_item(s, user, held, cfg)
         return held
-    leases = select(func.count(Lease.id)).where(Lease.item_id == Item.id, Lease.expires_at > t).scalar_subquery()
     passed: list[int] = []
-    order = (Item.quarantined, Item.n_reviews.desc(), Item.id)
-    # the open items in queue order, a page at a time: the conditions below (correlated
-    # subqueries) then run on a page, not on every open item of a long queue. The page reads
-    # the first rows of the queue-order index (`ix_items_queue`); "not closed" rather than
-    # "collecting" because SQLite's planner would take the status index for an IN and sort
-    # every open item instead
     for page in range(10_000):
-        ids = s.scalars(select(Item.id).where(Item.status.not_in(NOT_COLLECTING)).order_by(*order)
-                        .limit(QUEUE_PAGE).offset(page * QUEUE_PAGE)).all()
-        if not ids:
-            return None
+        args = {**who, "offset": page * QUEUE_PAGE}
         while len(passed) < tries:
-            open_to_user = (
-                select(Item)
-                .where(Item.id.in_(ids), Item.status.in_(COLLECTING), Item.n_reviews + leases < Item.required_reviews,
-                       ~_reviewed_by(user.id), ~blindness.has_read(user), Item.id.not_in(passed))
-                .order_by(*order).limit(1)
-            )
-            item = s.scalar(open_to_user.with_for_update(skip_locked=True, of=Item))
+            args["passed"] = passed
+            item = s.scalar(_OPEN_SKIP, args)
             if item is None:
                 # SKIP LOCKED also passes over an item another request is deciding right now
                 # (its row lock): "none" is only sure once such rows are waited for, and asked
                 # again in a snapshot taken after they committed (the waiting statement still
                 # counts, say, a lease its holder has since turned into a review)
-                item = s.scalar(open_to_user.with_for_update(of=Item))
+                item = s.scalar(_OPEN_WAIT, args)
                 if item is None:
-                    item = s.scalar(open_to_user.with_for_update(skip_locked=True, of=Item))
+                    item = s.scalar(_OPEN_SKIP, args)
             if item is None:
-                break  # nothing open to this user on this page: the next page
+                break  # nothing open to this user on this page: the next page, if any
             try:
                 lease_item(s, user, item, cfg)  # refuses before it writes anything
                 return item
             except Stale:
                 passed.append(item.id)
-        if len(passed) >= tries:
+        if len(passed) >= tries or not s.scalars(_PAGE, {"offset": page * QUEUE_PAGE}).first():
             return None
     return None
 
@@ -239,11 +293,21 @@ def _same(r: Review, decision: str, values: dict | None, reason: str | None) -> 
     return r.decision == decision and r.values == values and (r.flag_reason or None) == ((reason or "").strip() or None)
 
 
+# a first review takes a place: never more than K (the condition), in one statement (built once)
+_ITEMS = Item.__table__
+_TAKE_PLACE = (update(_ITEMS)
+               .where(_ITEMS.c.id == bindparam("item_id"), _ITEMS.c.n_reviews < _ITEMS.c.required_reviews,
+                      _ITEMS.c.status.in_(COLLECTING))
+               .values(n_reviews=_ITEMS.c.n_reviews + 1, version=_ITEMS.c.version + 1, status=ItemStatus.reviewed))
+
+
 def submit_review(s: Session, user: User, item_id: int, body: dict, cfg: QueueSettings) -> tuple[Review, bool]:
     """Store a decision; return (the review, whether it was a harmless repeat)."""
     item = get_item(s, item_id, lock=True)
     decision, key = body.get("decision"), idempotency_key(body)
-    mine = s.scalar(select(Review).where(Review.item_id == item.id, Review.reviewer_id == user.id))
+    t = now()
+    st = standing(s, user, item.id, t)
+    mine = st.review
     if mine is not None and mine.idempotency_key == key:
         return mine, True
     decision, values, edited = _values_for(item, decision, body.get("fields"), body.get("reason"), cfg)
@@ -257,23 +321,21 @@ def submit_review(s: Session, user: User, item_id: int, body: dict, cfg: QueueSe
                     current={"version": current})
     if item.status not in COLLECTING:
         raise Stale(f"item {item.id} is {item.status}; it no longer takes reviews", current={"status": item.status})
-    blindness.refuse_write(s, user, item)  # a first decision or a change to one
+    blindness.refuse_write(s, user, item, read=st.read)  # a first decision or a change to one
     before = _review_dict(mine) if mine is not None else None
     if mine is None:
-        t = now()
-        held = s.scalar(select(Lease.id).where(Lease.item_id == item.id, Lease.user_id == user.id, Lease.expires_at > t))
-        if held is None and item.n_reviews + _active_leases(s, item.id, t, exclude_user=user.id) >= item.required_reviews:
+        held = st.lease is not None and st.lease.expires_at > t
+        if not held and item.n_reviews + st.others >= item.required_reviews:
             # leases are honoured: without one, a reviewer may not take a place others hold
             raise Stale(f"item {item.id} is held by other reviewers; take the next item instead")
         # `item` was read under its row lock in this transaction (SQLite: the one writer), so
-        # the UPDATE's new counts are computed in memory too ("evaluate"), without a reload
-        took = s.execute(
-            update(Item).where(Item.id == item.id, Item.n_reviews < Item.required_reviews, Item.status.in_(COLLECTING))
-            .values(n_reviews=Item.n_reviews + 1, version=Item.version + 1),
-            execution_options={"synchronize_session": "evaluate"},
-        ).rowcount
-        if not took:
+        # the new counts are known without a reload, and set as the stored values; the status a
+        # reviewed item has (`refresh_status`) is set by the same statement
+        if not s.execute(_TAKE_PLACE, {"item_id": item.id}).rowcount:
             raise Stale(f"item {item.id} already has its {item.required_reviews} reviews")
+        for name, value in (("n_reviews", item.n_reviews + 1), ("version", item.version + 1),
+                            ("status", ItemStatus.reviewed)):
+            set_committed_value(item, name, value)
         mine = Review(item_id=item.id, reviewer_id=user.id, decision=decision, values=values, edited=edited,
                       flag_reason=reason, idempotency_key=key, version=1)
         s.add(mine)
@@ -281,8 +343,8 @@ def submit_review(s: Session, user: User, item_id: int, body: dict, cfg: QueueSe
         mine.decision, mine.values, mine.edited, mine.flag_reason = decision, values, edited, reason
         mine.idempotency_key, mine.version, mine.updated_at = key, mine.version + 1, now()
         item.version += 1
-    s.execute(delete(Lease).where(Lease.item_id == item.id, Lease.user_id == user.id))
-    s.flush()
+    if st.lease is not None:
+        s.delete(st.lease)
     audit.record(s, user.name, "review" if before is None else "review_changed", item, before, _review_dict(mine))
     if item.n_reviews >= item.required_reviews:
         close(s, item, cfg, actor=user.name)
@@ -291,11 +353,14 @@ def submit_review(s: Session, user: User, item_id: int, body: dict, cfg: QueueSe
     return mine, False
 
 
+_REVIEW_VALUES = select(Review.values).where(Review.item_id == bindparam("item_id")).order_by(Review.id)  # built once
+
+
 def close(s: Session, item: Item, cfg: QueueSettings, actor: str) -> None:
     """All K reviews are in: final when every field agrees, else conflict on the disputed ones."""
-    reviews = s.scalars(select(Review).where(Review.item_id == item.id).order_by(Review.id)).all()
+    values = s.scalars(_REVIEW_VALUES, {"item_id": item.id}).all()
     hz = (item.context or {}).get("control_hz", cfg.control_hz)
-    agreed, disputed = agreement([r.values for r in reviews], cfg.time_tolerance_s, hz)
+    agreed, disputed = agreement(list(values), cfg.time_tolerance_s, hz)
     before = item.status
     item.agreed, item.disputed = agreed, disputed
     if disputed:

@@ -147,3 +147,23 @@ def test_the_writer_gate_is_freed_by_commit_rollback_and_a_failed_begin(tmp_path
     assert time.perf_counter() - t0 < 0.25  # none waited out the 0.3 s gate timeout
     other.close()
     engine.dispose()
+
+
+def test_a_pooled_postgresql_connection_killed_while_idle_is_replaced_before_use(pg_cluster):
+    """A team's server restarts while the review server idles: the next request still works
+    (the pool pings a connection before handing it out; PostgreSQL only, SQLite has no server)."""
+    from sqlalchemy import text
+
+    from pipeline.review import db
+
+    url = pg_cluster.new_database()
+    engine = db.make_engine(url)
+    try:
+        db.ping(engine)  # a connection now sits in the pool
+        pg_cluster._admin("SELECT pg_terminate_backend(pid) FROM pg_stat_activity "
+                          f"WHERE datname = '{engine.url.database}' AND pid <> pg_backend_pid()")
+        with engine.connect() as c:
+            assert c.execute(text("SELECT 1")).scalar() == 1
+    finally:
+        engine.dispose()
+        pg_cluster.drop_database(url)

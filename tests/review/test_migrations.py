@@ -19,7 +19,7 @@ from pipeline.review.db import Base, User, make_engine, write_session
 
 FIXTURE = Path(__file__).parent / "data" / "review_b67844a.sqlite"
 TABLES = ("users", "items", "reviews", "leases", "adjudications", "events")
-HEAD = "0004"
+HEAD = "0005"
 
 
 def _rows(db: Path) -> dict[str, list[tuple]]:

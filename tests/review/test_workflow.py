@@ -191,3 +191,19 @@ def test_leases_expire_so_an_absent_reviewer_holds_nothing(engine, people, items
     assert item(engine, got[0]).status == "pending"
     with write_session(engine) as s:  # cat still holds the item she got; eve gets the freed one
         assert workflow.lease_next(s, user(engine, "eve"), short).id == got[0]
+
+
+def test_the_next_items_page_reads_the_open_queue_index_without_a_sort_on_sqlite(tmp_path):
+    """`lease_next` takes its page from the partial index of open items, so closed items (not in
+    it) and a long queue cost nothing; SQLite's planner keeps to it only while the condition is
+    written as the index's own (`db.IS_COLLECTING`), not as an `IN`."""
+    from pipeline.review.db import make_engine
+
+    engine = make_engine(f"sqlite:///{tmp_path / 'q.sqlite'}")
+    try:
+        page = workflow._PAGE.params(offset=0).compile(dialect=engine.dialect, compile_kwargs={"literal_binds": True})
+        with engine.connect() as c:
+            plan = " | ".join(r[-1] for r in c.exec_driver_sql(f"EXPLAIN QUERY PLAN {page}"))
+    finally:
+        engine.dispose()
+    assert "USING INDEX ix_items_queue_open" in plan and "TEMP B-TREE" not in plan, plan

@@ -18,7 +18,7 @@ router = APIRouter(prefix="/api/items")
 @router.get("/{item_id}")
 def item(item_id: ItemId, user: UserDep, s: ReadDb):
     with s.begin():
-        return JSONResponse(views.reviewer_view(s, workflow.get_item(s, item_id), user))
+        return JSONResponse(views.reviewer_view(s, item_id, user))
 
 
 @router.post("/{item_id}/lease")

@@ -32,15 +32,16 @@ def media_file(rel: str, _user: UserDep, s: ReadDb, ctx: CtxDep):
 
 
 def _table(request: Request, ctx, s, item_id: int, kind: str) -> Response:
-    # an item's context never changes (a new proposal is a new item): its table's path is
-    # read from the database once per process
+    # an item's context never changes (a new proposal is a new item): its tables' paths are
+    # read from the database once per process, both at once (a page asks for both)
     rel = ctx.table_paths.get((item_id, kind))
     if rel is None:
         with s.begin():
-            rel = views.media_path(s, item_id, kind)
+            paths = views.table_paths(s, item_id)
         if len(ctx.table_paths) >= TABLE_PATHS_MAX:
             ctx.table_paths.clear()
-        ctx.table_paths[(item_id, kind)] = rel
+        ctx.table_paths.update({(item_id, k): v for k, v in paths.items()})
+        rel = paths[kind]
     path = media.safe_path(ctx.run_dir, rel)
     if path is None:
         raise NotFound(f"item {item_id} has no {kind} table")
