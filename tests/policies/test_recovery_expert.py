@@ -277,3 +277,34 @@ def test_a_tall_obstruction_is_set_aside_standing(bowl_on_plate):
     assert checks.held(s) is None
     assert np.linalg.norm(env.object_pose(obj)[0][:2] - start_xy) > 0.03
     assert s.box(obj).size[2] > 0.9 * tall  # standing
+
+
+@pytest.mark.sim
+def test_a_frying_pan_is_set_down_with_its_origin_on_the_cook_region(tmp_path):
+    """A tuning run's scene (libero_90 KITCHEN_SCENE9, init state 4, default noise, step 149,
+    made again by stage 1's own code): the pan, held so that its box centre lies 9 cm from
+    its body origin (in the pan), was set down with its length centred on the stove and its
+    origin off the cook region, on the stove but not `On` it, until the horizon."""
+    from pipeline.config import Config, load_config
+    from pipeline.policies.scripted import ScriptedPolicy
+    from pipeline.release.experts import attempt, recovery_expert
+    from pipeline.sim import get_task
+    from pipeline.stage1.units import EpisodeUnit
+    from pipeline.stage1.worker import run_one
+
+    suite, task, step = "libero_90", "KITCHEN_SCENE9_turn_on_the_stove_and_put_the_frying_pan_on_it", 149
+    raw = load_config("configs/default.yaml").model_dump()
+    raw["run"]["output_dir"] = str(tmp_path)
+    raw["stage1"]["rollout"]["horizon"] = step
+    raw["stage1"]["video"]["render"] = "none"
+    cfg = Config.model_validate(raw)
+    env = build_env(get_task(suite, task))
+    try:
+        rec = run_one(env, ScriptedPolicy(cfg.stage1.policy.scripted), EpisodeUnit(suite, task, 0, 4, 397857303, "scripted"),
+                      cfg, tmp_path / "stage1")
+        scene = np.load(tmp_path / "stage1" / rec.path / "states.npy")[step]
+        out = attempt(env, scene, recovery_expert(env, 0, 0.0), 0, 520, 8)
+        pan = env.object_pose("chefmate_8_frypan_1")[0]
+    finally:
+        env.close()
+    assert out.success, (out, pan)

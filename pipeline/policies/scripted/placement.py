@@ -235,6 +235,16 @@ def place_room(s: Scene, obj: str, target: str) -> bool:
     return place_choice(s, obj, target)[1] == 0
 
 
+def inside_region(env, target: str, xy: np.ndarray) -> np.ndarray:
+    """`xy` moved the least that keeps a body origin within REGION_INSIDE of the region
+    `target`'s half extent (LIBERO's `On` tests the body origin); unchanged for a non-region."""
+    if not env.is_region(target):
+        return xy
+    r = env.region(target)
+    half = np.abs(r.mat @ r.size)[:2] * REGION_INSIDE
+    return np.clip(xy, r.pos[:2] - half, r.pos[:2] + half)
+
+
 def box_centre_offset(s: Scene, obj: str) -> np.ndarray:
     """xy of the object's box centre relative to its body origin (a bowl's is off-centre)."""
     return s.box(obj).centre[:2] - s.env.object_pose(obj)[0][:2]
