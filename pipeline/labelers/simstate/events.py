@@ -33,10 +33,10 @@ Rules:
   Step: the open command that released it (if within `grasp_window` steps before), else
   the release.
 - object_misplaced: a hold of a target that raised it >= `lift_m` ends after an open command
-  (within `grasp_window` steps before the hold ends) and is no drop (it was set down on something, or fell less
-  than `drop_m`), and goal progress does not rise (as for a drop) within 2 * `drop_window`
-  steps nor before the next hold begins: the target was let go where the goal does not
-  want it. Step: that open command (the release at the wrong place).
+  (within `grasp_window` steps before the hold ends) and is no drop (it was set down on
+  something, or fell less than `drop_m`), and goal progress does not rise (as for a drop)
+  within 2 * `drop_window` steps nor before the next hold begins: the target was let go
+  where the goal does not want it. Step: that open command (the release at the wrong place).
 - object_toppled: an object not held, and not held in the last `drop_window` steps (a
   release or a slip that tips it is that event, an object tipping over inside its
   container is no failure), tilts >= `topple_deg` from its start orientation, and was not

@@ -391,7 +391,7 @@ class TruthLog:
                         "held": self.held[b_row] == o, "position": self.pos[b_row][i].astype(np.float32).tolist()})
         return out
 
-    def _let_go(self, a: Attempt, skill_let_go: int) -> int:
+    def _let_go(self, a: Attempt, skill_step: int) -> int:
         """When the hand stopped operating the part: the first state after the fingers' last
         touch of it since they closed on it (a handle slipping out mid-pull), else the skill's
         own let-go (fingers that closed on air pulled nothing until then)."""
@@ -399,8 +399,8 @@ class TruthLog:
         name = a.conjunct[1] if len(a.conjunct) > 1 else a.target
         part = env.region(name).parent if env.is_region(name) else name
         grip = min([s for lab, s in a.phases if lab.startswith("grip")], default=a.start)
-        touched = [r for r in range(grip, min(skill_let_go, len(self.touch) - 1) + 1) if part in self.touch[r]]
-        return min(skill_let_go, touched[-1] + 1) if touched else skill_let_go
+        touched = [r for r in range(grip, min(skill_step, len(self.touch) - 1) + 1) if part in self.touch[r]]
+        return min(skill_step, touched[-1] + 1) if touched else skill_step
 
     def _unfinished(self, a: Attempt, last: int) -> None:
         """An attempt the episode ended inside (or that stopped without a verdict)."""
