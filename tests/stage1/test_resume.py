@@ -18,7 +18,7 @@ from pipeline.atomic import Completions
 from pipeline.records import read_episodes
 
 HERE = Path(__file__).parent
-N_EPISODES = 8
+N_EPISODES = 16  # room for a kill between the 2nd and the last marker on a loaded machine (8 all finished once)
 
 SCRIPT = f"""
 import sys
