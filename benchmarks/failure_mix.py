@@ -130,6 +130,20 @@ def rows(mixes: list[dict]) -> list[tuple[str, list[str]]]:
     return out
 
 
+def side_by_side(title: str, names: list[str], body: list[tuple[str, list[str]]]) -> list[str]:
+    """Print `body` (a label and one cell per run) as a table with one column per run; its
+    markdown lines."""
+    table = Table(title=title)
+    table.add_column("")
+    for n in names:
+        table.add_column(n, justify="right")
+    for label, cells in body:
+        table.add_row(label, *cells)
+    Console().print(table)
+    md = ["| | " + " | ".join(names) + " |", "|---|" + "---|" * len(names)]
+    return md + [f"| {label} | " + " | ".join(cells) + " |" for label, cells in body]
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("runs", nargs="+", type=Path)
@@ -142,17 +156,8 @@ def main() -> None:
     if len(names) != len(a.runs):
         ap.error("--names needs one name per run")
     mixes = [mix(r) for r in a.runs]
-    table = Table(title="failure generator: rate and kinds (truth of the first failed attempt)")
-    table.add_column("")
-    for n in names:
-        table.add_column(n, justify="right")
-    body = rows(mixes)
-    for label, cells in body:
-        table.add_row(label, *cells)
-    Console().print(table)
+    md = side_by_side("failure generator: rate and kinds (truth of the first failed attempt)", names, rows(mixes))
     a.out.parent.mkdir(parents=True, exist_ok=True)
-    md = ["| | " + " | ".join(names) + " |", "|---|" + "---|" * len(names)]
-    md += [f"| {label} | " + " | ".join(cells) + " |" for label, cells in body]
     for name, m in zip(names, mixes, strict=True):
         rare = rare_groups(m, a.rare, a.min_group)
         never = sorted(t for t, (f, n, _) in m["tasks"].items() if f == 0)

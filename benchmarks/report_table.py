@@ -23,8 +23,8 @@ from collections import Counter
 from pathlib import Path
 
 import pyarrow.parquet as pq
+from failure_mix import side_by_side  # benchmarks/ is the script's own folder
 from rich.console import Console
-from rich.table import Table
 
 from pipeline.layout import RunLayout
 from pipeline.records import read_episodes
@@ -111,16 +111,7 @@ def main() -> None:
         ap.error("--names needs one name per run")
     figs = [figures(r) for r in a.runs]
     console = Console()
-    table = Table(title="tuning protocol: certificates and simstate labels against the truth")
-    table.add_column("")
-    for n in names:
-        table.add_column(n, justify="right")
-    body = rows(figs)
-    for label, cells in body:
-        table.add_row(label, *cells)
-    console.print(table)
-    md = ["| | " + " | ".join(names) + " |", "|---|" + "---|" * len(names)]
-    md += [f"| {label} | " + " | ".join(cells) + " |" for label, cells in body]
+    md = side_by_side("tuning protocol: certificates and simstate labels against the truth", names, rows(figs))
     for name, f in zip(names, figs, strict=True):
         met = aims_met(f)
         line = f"{name}: aims " + ", ".join(f"{k} {'met' if v else 'MISSED'}" for k, v in met.items())

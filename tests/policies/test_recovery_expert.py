@@ -285,24 +285,15 @@ def test_a_frying_pan_is_set_down_with_its_origin_on_the_cook_region(tmp_path):
     made again by stage 1's own code): the pan, held so that its box centre lies 9 cm from
     its body origin (in the pan), was set down with its length centred on the stove and its
     origin off the cook region, on the stove but not `On` it, until the horizon."""
-    from pipeline.config import Config, load_config
-    from pipeline.policies.scripted import ScriptedPolicy
     from pipeline.release.experts import attempt, recovery_expert
     from pipeline.sim import get_task
-    from pipeline.stage1.units import EpisodeUnit
-    from pipeline.stage1.worker import run_one
+    from tests.stage1.default_episode import default_episode
 
     suite, task, step = "libero_90", "KITCHEN_SCENE9_turn_on_the_stove_and_put_the_frying_pan_on_it", 149
-    raw = load_config("configs/default.yaml").model_dump()
-    raw["run"]["output_dir"] = str(tmp_path)
-    raw["stage1"]["rollout"]["horizon"] = step
-    raw["stage1"]["video"]["render"] = "none"
-    cfg = Config.model_validate(raw)
     env = build_env(get_task(suite, task))
     try:
-        rec = run_one(env, ScriptedPolicy(cfg.stage1.policy.scripted), EpisodeUnit(suite, task, 0, 4, 397857303, "scripted"),
-                      cfg, tmp_path / "stage1")
-        scene = np.load(tmp_path / "stage1" / rec.path / "states.npy")[step]
+        folder = default_episode(env, tmp_path, suite, task, 4, 397857303, horizon=step)
+        scene = np.load(folder / "states.npy")[step]
         out = attempt(env, scene, recovery_expert(env, 0, 0.0), 0, 520, 8)
         pan = env.object_pose("chefmate_8_frypan_1")[0]
     finally:

@@ -191,25 +191,16 @@ def test_a_handle_that_slips_out_mid_pull_is_let_go_where_the_fingers_left_it(tm
     """A drawer pull whose handle slipped out of the fingers 9 steps into the pull (found on a
     tuning run: libero_90, init state 4, default noise): the onset is the first state without
     the fingers on the cabinet, not the skill's own let-go 50 steps later."""
-    from pipeline.config import Config, load_config
-    from pipeline.policies.scripted import ScriptedPolicy
     from pipeline.sim import build_env, get_task
-    from pipeline.stage1.units import EpisodeUnit
-    from pipeline.stage1.worker import run_one
+    from tests.stage1.default_episode import default_episode
 
     suite, task = "libero_90", "KITCHEN_SCENE1_open_the_top_drawer_of_the_cabinet"
-    raw = load_config("configs/default.yaml").model_dump()
-    raw["run"]["output_dir"] = str(tmp_path)
-    raw["stage1"]["rollout"]["horizon"] = 240
-    raw["stage1"]["video"]["render"] = "none"
-    cfg = Config.model_validate(raw)
     env = build_env(get_task(suite, task))
     try:
-        rec = run_one(env, ScriptedPolicy(cfg.stage1.policy.scripted), EpisodeUnit(suite, task, 0, 4, 631111876, "scripted"),
-                      cfg, tmp_path / "stage1")
+        folder = default_episode(env, tmp_path, suite, task, 4, 631111876, horizon=240)
     finally:
         env.close()
-    rows, _ = read_truth(tmp_path / "stage1" / rec.path / "truth.parquet")
+    rows, _ = read_truth(folder / "truth.parquet")
     first = rows[0]
     skill_let_go = min(p["step"] for p in first["phases"] if p["label"] == "let_go")
     assert (first["outcome"], first["event"]) == ("half_open", "let_go")
