@@ -119,8 +119,10 @@ def close_part(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:
     return _operate_part(ctx, conjunct, opening=False)
 
 
-def pull_drawer(ctx: Ctx, joint: str) -> Plan:
-    """Tilt the hand to point at the drawer, fingers above and below the handle bar, grip, pull."""
+def pull_drawer(ctx: Ctx, joint: str, reach_speed: float = 0.4, pull_speed: float = 0.5) -> Plan:
+    """Tilt the hand to point at the drawer, fingers above and below the handle bar, grip, pull.
+    `reach_speed`, `pull_speed`: of the reach to the handle and of the pull (the plain
+    expert's are slow and sure; the recovery expert, on a budget, moves faster)."""
     s, env = ctx.scene, ctx.scene.env
     fr = env.joint_frame(joint)
     sign = open_sign(fr.range)
@@ -146,14 +148,15 @@ def pull_drawer(ctx: Ctx, joint: str) -> Plan:
     # pass between neighbouring drawers' handles, 7 cm apart
     yield Grip(-1.0, 5, label="open_fully")
     yield Grip(1.0, 3, label="half_close")
-    yield ctx.move(pos, gripper=0.0, speed=0.4, yaw=yaw, approach=approach, tol=0.006, max_steps=50, label="reach_handle")
+    yield ctx.move(pos, gripper=0.0, speed=reach_speed, yaw=yaw, approach=approach, tol=0.006, max_steps=50,
+                   label="reach_handle")
     t = ctx.noise.timing()
     ctx.note(grasp_timing=t)
     yield Grip(1.0, ctx.close_steps + max(t, 0), label="grip_handle")
     u = sign * env.joint_frame(joint).qpos  # how open it is now
     full = float(np.max(np.abs(fr.range)))
     target = s.eef() + pull * (full - u + 0.01)
-    yield ctx.move(target, gripper=1.0, speed=0.5, yaw=yaw, approach=approach, tol=0.01, max_steps=60, label="pull")
+    yield ctx.move(target, gripper=1.0, speed=pull_speed, yaw=yaw, approach=approach, tol=0.01, max_steps=60, label="pull")
     yield Grip(-1.0, ctx.open_steps, label="let_go")
     yield ctx.move(s.eef() + pull * 0.06, yaw=yaw, approach=approach, tol=0.015, max_steps=30, label="back_off")
     ctx.yaw_hold, ctx.approach_hold = 0.0, None
