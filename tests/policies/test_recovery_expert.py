@@ -324,7 +324,7 @@ def test_a_bowl_under_the_open_drawer_goes_in_before_the_horizon(tmp_path):
     under the drawer's front. Pushed in, set aside 0.33 m off (the near spots beyond the
     sweep were blocked toward the robot) and pulled out by its handle at the plain
     expert's pace, it went in at step 549 (timeout); set aside across the far side, just
-    beyond the sweep, and the handle reached and pulled faster, well inside 520."""
+    beyond the sweep, and the handle reached and pulled faster, at step 503."""
     out = tune26_attempt(tmp_path, "libero_goal", "open_the_top_drawer_and_put_the_bowl_inside", 506136647, 327)
     assert out.success and out.steps <= 510, out
 
