@@ -299,3 +299,24 @@ def test_a_frying_pan_is_set_down_with_its_origin_on_the_cook_region(tmp_path):
     finally:
         env.close()
     assert out.success, (out, pan)
+
+
+@pytest.mark.sim
+def test_an_object_lying_against_a_basket_wall_is_pushed_clear_then_grasped(tmp_path):
+    """A tuning run's scene (libero_object, init state 4, default noise, step 296): the
+    pudding lies 1.6 cm before the basket's front wall, so every grasp candidate puts a
+    finger and the palm onto the wall; every descent stopped there until the horizon. It is
+    pushed along the wall, clear of it, then grasped (~200 steps)."""
+    from pipeline.release.experts import attempt, recovery_expert
+    from pipeline.sim import get_task
+    from tests.stage1.default_episode import default_episode
+
+    suite, task, step = "libero_object", "pick_up_the_chocolate_pudding_and_place_it_in_the_basket", 296
+    env = build_env(get_task(suite, task))
+    try:
+        folder = default_episode(env, tmp_path, suite, task, 4, 19454025, horizon=step)
+        scene = np.load(folder / "states.npy")[step]
+        out = attempt(env, scene, recovery_expert(env, 0, 0.0), 0, 520, 8)
+    finally:
+        env.close()
+    assert out.success and out.steps <= 300, out

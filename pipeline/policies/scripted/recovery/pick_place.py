@@ -15,6 +15,7 @@ from pipeline.policies.scripted.notes import Note, Outcome
 from pipeline.policies.scripted.placement import box_centre_offset, destination
 from pipeline.policies.scripted.recovery import checks
 from pipeline.policies.scripted.recovery.long_grasp import lying_long, slide_clear
+from pipeline.policies.scripted.recovery.nudge import palm_clear, push, push_plan
 from pipeline.policies.scripted.recovery.lying_cup import grasp_by_handle, lying_handle_grasp, place_by_handle
 from pipeline.policies.scripted.recovery.stand_book import quarter_turn, stand_tilt, stand_up, too_steep
 from pipeline.policies.scripted.skills import place
@@ -45,8 +46,15 @@ def pick_place_once(ctx: Ctx, conjunct: tuple[str, ...], attempt: int) -> Plan:
         else:
             yield from free_hand(ctx)
             dest = destination(ctx.scene, obj, target)
-            # a candidate whose fingers land clear of other objects (they would be clamped too)
-            choice = checks.clear_grasp_choice(s, obj, dest, attempt)
+            # a candidate whose fingers (and palm) land clear of other objects (they would be
+            # clamped too); none: push the object clear of its neighbour first (nudge.py)
+            choice = palm_clear(s, obj, dest, attempt)
+            if choice is None and (shove := push_plan(s, obj, dest)) is not None:
+                yield from push(ctx, obj, shove)
+                dest = destination(ctx.scene, obj, target)
+                choice = palm_clear(s, obj, dest, attempt)
+            if choice is None:
+                choice = checks.clear_grasp_choice(s, obj, dest, attempt)
             yield from grasp(ctx, obj, dest, choice=choice, g=slide_clear(s, obj, plan_grasp(s, obj, dest, choice)),
                              hover_m=0.08 + 0.03 * min(attempt, 2), turn_tol=TURN_TOL)
         if not carried(s, obj, checks.held(s)):

@@ -1,0 +1,191 @@
+"""Skill: push an object clear of a wall before grasping it.
+
+An object lying against a neighbour (a pudding against the wall of the basket it goes into)
+can leave no grasp candidate clear: every yaw puts a finger or the palm into the wall, and
+each descent stops on the wall's top (measured: four attempts, then the horizon). The ray
+test of `checks.tip_blockers` sees the fingertips only; `palm_block` also tests the hand's
+boxes (palm and fingers) against the neighbours' collision boxes. When no candidate is
+clear, `push_plan` finds the shortest push by the closed fist that frees one (the object
+slides along the wall, away from it), and `push` does it; the grasp is then chosen again
+from the live scene.
+
+Geometry is planned by translating the object (its grasp candidates move with it); the
+push itself reads nothing but the plan, and the caller replans from the live state.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from pipeline.policies.scripted.grasps import plan_grasp
+from pipeline.policies.scripted.hand import FINGER_REACH, Grasp, closing_axis, closing_yaw
+from pipeline.policies.scripted.motion import HAND_CLEARANCE, Ctx, Plan, travel
+from pipeline.policies.scripted.recovery import checks
+from pipeline.policies.scripted.scene import Scene, robot_base
+
+# the hand at a grip site pointing down, in (along the closing axis, across it, up) from the
+# grip site: the palm's box reaches ~10 cm either way from ~5 cm above the site (see
+# grasps.blocked_depth); an open finger is ~2 cm square, its tip ~1.2 cm below the site
+PALM = ((-0.10, 0.10), (-checks.PALM_HALF_M, checks.PALM_HALF_M), (0.05, 0.30))
+FINGER = ((-0.01, 0.01), (-0.01, 0.01), (-0.012, 0.05))
+FIST = ((-0.015, 0.015), (-0.012, 0.012), (-0.012, 0.05))  # both fingers closed together
+TRIES = 6  # grasp candidates looked at
+DIRECTIONS = 12  # push directions, evenly round
+OFFSETS = (0.0, -0.01, 0.01)  # the fist's contact point across the push, from the object's middle
+LENGTHS = (0.05, 0.08, 0.11, 0.14)  # push lengths, shortest first
+SLIP_M = 0.02  # the object may lag the fist by this much (it turns, slides): planned clear without it
+GAP_M = 0.02  # the fist comes down this far behind the object
+PUSH_Z = 0.025  # grip site above the table while pushing (fingertips ~1.3 cm above it)
+FREE_PAD = 0.004  # neighbours' boxes padded by this much
+ABOVE_TABLE = 0.005  # boxes lower than this above the table top are the table (or a mat)
+
+
+@dataclass(frozen=True)
+class Push:
+    start: np.ndarray  # grip site where the fist comes down behind the object
+    end: np.ndarray  # ... and where the push ends
+    yaw: float  # hand yaw: the palm's length along the push
+    shift: np.ndarray  # the object's planned horizontal shift (x, y, 0)
+
+
+def _neighbours(scene: Scene, obj: str) -> list[tuple[str, np.ndarray]]:
+    top = scene.table_height() + ABOVE_TABLE
+    return [(n, b) for n, b in scene.obstacle_boxes({obj}) if b[1, 2] > top]
+
+
+def _hits(pos: np.ndarray, yaw: float, part, box: np.ndarray, along_off: float = 0.0, pad: float = FREE_PAD) -> bool:
+    """The hand `part` (a box in hand coordinates, moved `along_off` along the closing axis)
+    at grip site `pos` and `yaw` overlaps the world box `box` (separating axes in the plane)."""
+    (a0, a1), (c0, c1), (z0, z1) = part
+    if pos[2] + z1 < box[0, 2] - pad or pos[2] + z0 > box[1, 2] + pad:
+        return False
+    ax = closing_axis(yaw)[:2]
+    cx = np.array([-ax[1], ax[0]])
+    corners = np.array([pos[:2] + ax * (a + along_off) + cx * c for a in (a0, a1) for c in (c0, c1)])
+    lo, hi = box[0, :2] - pad, box[1, :2] + pad
+    if np.any(corners.max(axis=0) < lo) or np.any(corners.min(axis=0) > hi):
+        return False
+    rect = np.array([[lo[0], lo[1]], [lo[0], hi[1]], [hi[0], lo[1]], [hi[0], hi[1]]])
+    for axis, (u0, u1) in ((ax, (a0 + along_off, a1 + along_off)), (cx, (c0, c1))):
+        p = rect @ axis - pos[:2] @ axis
+        if p.max() < u0 or p.min() > u1:
+            return False
+    return True
+
+
+def palm_block(scene: Scene, obj: str, g: Grasp, shift: np.ndarray | None = None) -> list[str]:
+    """Neighbours of `obj` that the open hand's palm or fingers go into when grasping with
+    `g` (moved by `shift` with the object): a palm landing on a wall's top, which the
+    fingertip rays miss."""
+    pos = g.pos if shift is None else g.pos + shift
+    out = []
+    for name, box in _neighbours(scene, obj):
+        if name in out:
+            continue
+        if _hits(pos, g.yaw, PALM, box) or any(_hits(pos, g.yaw, FINGER, box, sg * FINGER_REACH) for sg in (-1, 1)):
+            out.append(name)
+    return out
+
+
+def _clear(scene: Scene, obj: str, g: Grasp, shift: np.ndarray | None = None) -> bool:
+    moved = g if shift is None else Grasp(pos=g.pos + shift, yaw=g.yaw, rim=g.rim)
+    return not palm_block(scene, obj, g, shift) and not checks.tip_blockers(scene, obj, moved, set())
+
+
+def palm_clear(scene: Scene, obj: str, dest: np.ndarray | None, attempt: int) -> int | None:
+    """A grasp candidate whose fingers and palm land clear of neighbours, or None. The first
+    attempt trusts the fingertip rays alone when they see a clear candidate (a palm's edge
+    brushing a light neighbour only nudges it); after a failed attempt the palm counts too."""
+    rays = checks.clear_grasp_choice(scene, obj, dest, attempt, TRIES)
+    if attempt == 0 and not checks.tip_blockers(scene, obj, plan_grasp(scene, obj, dest, rays), set()):
+        return rays
+    for k in range(attempt, attempt + TRIES):
+        if _clear(scene, obj, plan_grasp(scene, obj, dest, k)):
+            return k
+    return None
+
+
+def _pushed_into(scene: Scene, obj: str, shift: np.ndarray, boxes) -> bool:
+    """Sliding `obj` by `shift` (and the slip beyond it) drives it into a neighbour."""
+    b = scene.box(obj)
+    n = float(np.linalg.norm(shift))
+    u = shift / n
+    for d in np.linspace(0.005, n + SLIP_M, 8):
+        lo, hi = b.lo[:2] + u[:2] * d, b.hi[:2] + u[:2] * d
+        for _, box in boxes:
+            if box[0, 2] < b.hi[2] and np.all(box[0, :2] - FREE_PAD < hi) and np.all(lo < box[1, :2] + FREE_PAD):
+                # (boxes it already overlaps, a mat it stands on, do not count)
+                if not (np.all(box[0, :2] < b.hi[:2]) and np.all(b.lo[:2] < box[1, :2])):
+                    return True
+    return False
+
+
+def _hand_path_clear(pos: np.ndarray, end: np.ndarray, yaw: float, boxes) -> bool:
+    for t in np.linspace(0.0, 1.0, 6):
+        p = (1 - t) * pos + t * end
+        if any(_hits(p, yaw, FIST, box) or _hits(p, yaw, PALM, box) for _, box in boxes):
+            return False
+    return True
+
+
+def push_plan(scene: Scene, obj: str, dest: np.ndarray | None) -> Push | None:
+    """The shortest push of `obj` by the fist after which some grasp candidate is clear: the
+    fist comes down behind it and pushes straight, the hand clear of every neighbour and
+    the object driven into none; ties go to the end nearest the arm's home. None: no push
+    frees it."""
+    boxes = _neighbours(scene, obj)
+    corners = scene.env.object_corners(obj)[:, :2]
+    centre = scene.box(obj).centre
+    z = scene.table_height() + PUSH_Z
+    base = robot_base(scene)[:2]
+    home = base + checks.HOME_XY
+    cands = [plan_grasp(scene, obj, dest, k) for k in range(TRIES)]
+    for length in LENGTHS:
+        best = None
+        for theta in np.arange(DIRECTIONS) * 2 * np.pi / DIRECTIONS:
+            u = np.array([np.cos(theta), np.sin(theta), 0.0])
+            across = np.array([-u[1], u[0], 0.0])
+            shift = u * length
+            end_xy = centre[:2] + shift[:2]
+            if not checks.MIN_REACH_M < float(np.linalg.norm(end_xy - base)) < checks.REACH_M:
+                continue
+            if _pushed_into(scene, obj, shift, boxes):
+                continue
+            if not any(_clear(scene, obj, g, u * (length - SLIP_M)) for g in cands):
+                continue
+            back = float((corners @ u[:2]).min())
+            mid = float((corners @ across[:2]).mean())
+            width = float(np.ptp(corners @ across[:2]))
+            yaw = closing_yaw(u)
+            for off in OFFSETS:
+                if abs(off) > width / 2 - 0.005:  # (the fist stays on the object's face)
+                    continue
+                start = u * (back - GAP_M - FIST[0][1]) + across * (mid + off)
+                start[2] = z
+                end = start + u * (GAP_M + length)
+                if not _hand_path_clear(start, end, yaw, boxes):
+                    continue
+                cost = float(np.linalg.norm(end_xy - home))
+                if best is None or cost < best[0]:
+                    best = (cost, Push(start=start, end=end, yaw=yaw, shift=shift))
+                break
+        if best is not None:
+            return best[1]
+    return None
+
+
+def push(ctx: Ctx, obj: str, plan: Push) -> Plan:
+    """Close the hand into a fist on the way, come down behind `obj`, push it along the
+    plan and rise (the hand stays closed: the grasp that follows opens it on its way)."""
+    s = ctx.scene
+    above = plan.start + [0, 0, 0.08]
+    lift_z = s.path_clearance(s.eef(), above, 0.06, set()) + HAND_CLEARANCE
+    yield from travel(ctx, above, plan.yaw, 1.0, lift_z)
+    yield ctx.move(above, gripper=1.0, yaw=plan.yaw, tol=0.012, rot_tol=0.1, max_steps=40, label="over_push")
+    yield ctx.move(plan.start, gripper=1.0, speed=0.5, yaw=plan.yaw, tol=0.008, max_steps=40, label="fist_down")
+    yield ctx.move(plan.end, gripper=1.0, speed=0.35, yaw=plan.yaw, tol=0.008, max_steps=60, label="push")
+    u = plan.shift / float(np.linalg.norm(plan.shift))
+    yield ctx.move(s.eef() - u * 0.02 + [0, 0, 0.08], gripper=1.0, yaw=plan.yaw, tol=0.02, max_steps=30,
+                   label="push_rise")
