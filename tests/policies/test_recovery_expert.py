@@ -320,3 +320,25 @@ def test_an_object_lying_against_a_basket_wall_is_pushed_clear_then_grasped(tmp_
     finally:
         env.close()
     assert out.success and out.steps <= 300, out
+
+
+@pytest.mark.sim
+def test_a_bottle_lying_beside_the_wine_rack_is_grasped_clear_of_it_and_laid_in_its_top_slot(tmp_path):
+    """A tuning run's scene (libero_goal, init state 4, default noise, step 73): the toppled
+    bottle lies beside the rack. The fingertip rays saw its grasp clear, but the palm came
+    down on the rack's slats (the grasp is slid along the bottle, clear of them), and the
+    bottle, set down in the tilted slot's level box, landed on the slot's lip and rolled off
+    (it is aimed out along the slot's plate, behind the lip). Both: a timeout before."""
+    from pipeline.release.experts import attempt, recovery_expert
+    from pipeline.sim import get_task
+    from tests.stage1.default_episode import default_episode
+
+    suite, task, step = "libero_goal", "put_the_wine_bottle_on_the_rack", 73
+    env = build_env(get_task(suite, task))
+    try:
+        folder = default_episode(env, tmp_path, suite, task, 4, 875160940, horizon=step)
+        scene = np.load(folder / "states.npy")[step]
+        out = attempt(env, scene, recovery_expert(env, 0, 0.0), 0, 520, 8)
+    finally:
+        env.close()
+    assert out.success and out.steps <= 380, out

@@ -23,12 +23,15 @@ from pipeline.policies.scripted.grasps import plan_grasp
 from pipeline.policies.scripted.hand import FINGER_REACH, Grasp, closing_axis, closing_yaw
 from pipeline.policies.scripted.motion import HAND_CLEARANCE, Ctx, Plan, travel
 from pipeline.policies.scripted.recovery import checks
+from pipeline.policies.scripted.recovery.long_grasp import slide_clear, slides
 from pipeline.policies.scripted.scene import Scene, robot_base
 
 # the hand at a grip site pointing down, in (along the closing axis, across it, up) from the
 # grip site: the palm's box reaches ~10 cm either way from ~5 cm above the site (see
-# grasps.blocked_depth); an open finger is ~2 cm square, its tip ~1.2 cm below the site
-PALM = ((-0.10, 0.10), (-checks.PALM_HALF_M, checks.PALM_HALF_M), (0.05, 0.30))
+# grasps.blocked_depth), the wrist above it is narrower; an open finger is ~2 cm square,
+# its tip ~1.2 cm below the site
+PALM = ((-0.10, 0.10), (-checks.PALM_HALF_M, checks.PALM_HALF_M), (0.05, 0.12))
+WRIST = ((-0.04, 0.04), (-0.04, 0.04), (0.12, 0.30))
 FINGER = ((-0.01, 0.01), (-0.01, 0.01), (-0.012, 0.05))
 FIST = ((-0.015, 0.015), (-0.012, 0.012), (-0.012, 0.05))  # both fingers closed together
 TRIES = 6  # grasp candidates looked at
@@ -84,7 +87,8 @@ def palm_block(scene: Scene, obj: str, g: Grasp, shift: np.ndarray | None = None
     for name, box in _neighbours(scene, obj):
         if name in out:
             continue
-        if _hits(pos, g.yaw, PALM, box) or any(_hits(pos, g.yaw, FINGER, box, sg * FINGER_REACH) for sg in (-1, 1)):
+        if (_hits(pos, g.yaw, PALM, box) or _hits(pos, g.yaw, WRIST, box)
+                or any(_hits(pos, g.yaw, FINGER, box, sg * FINGER_REACH) for sg in (-1, 1))):
             out.append(name)
     return out
 
@@ -94,16 +98,22 @@ def _clear(scene: Scene, obj: str, g: Grasp, shift: np.ndarray | None = None) ->
     return not palm_block(scene, obj, g, shift) and not checks.tip_blockers(scene, obj, moved, set())
 
 
-def palm_clear(scene: Scene, obj: str, dest: np.ndarray | None, attempt: int) -> int | None:
-    """A grasp candidate whose fingers and palm land clear of neighbours, or None. The first
-    attempt trusts the fingertip rays alone when they see a clear candidate (a palm's edge
-    brushing a light neighbour only nudges it); after a failed attempt the palm counts too."""
+def palm_clear(scene: Scene, obj: str, dest: np.ndarray | None, attempt: int) -> tuple[int, Grasp] | None:
+    """A grasp candidate (and its grasp, slid along a long object if need be) whose fingers
+    and palm land clear of neighbours, or None. The first attempt trusts the fingertip rays
+    when they see a clear candidate whose palm meets no fixture (a palm's edge brushing a
+    light object only nudges it; a rack or a cabinet stops the descent); after a failed
+    attempt the palm counts whatever it meets."""
     rays = checks.clear_grasp_choice(scene, obj, dest, attempt, TRIES)
-    if attempt == 0 and not checks.tip_blockers(scene, obj, plan_grasp(scene, obj, dest, rays), set()):
-        return rays
+    g = slide_clear(scene, obj, plan_grasp(scene, obj, dest, rays))
+    if (attempt == 0 and not checks.tip_blockers(scene, obj, g, set())
+            and not set(palm_block(scene, obj, g)) & set(scene.env.fixture_names)):
+        return rays, g
     for k in range(attempt, attempt + TRIES):
-        if _clear(scene, obj, plan_grasp(scene, obj, dest, k)):
-            return k
+        g = plan_grasp(scene, obj, dest, k)
+        for h in [slide_clear(scene, obj, g), *slides(scene, obj, g)]:
+            if _clear(scene, obj, h):
+                return k, h
     return None
 
 
@@ -125,7 +135,7 @@ def _pushed_into(scene: Scene, obj: str, shift: np.ndarray, boxes) -> bool:
 def _hand_path_clear(pos: np.ndarray, end: np.ndarray, yaw: float, boxes) -> bool:
     for t in np.linspace(0.0, 1.0, 6):
         p = (1 - t) * pos + t * end
-        if any(_hits(p, yaw, FIST, box) or _hits(p, yaw, PALM, box) for _, box in boxes):
+        if any(_hits(p, yaw, part, box) for part in (FIST, PALM, WRIST) for _, box in boxes):
             return False
     return True
 
