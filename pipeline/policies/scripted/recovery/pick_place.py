@@ -21,26 +21,30 @@ from pipeline.policies.scripted.recovery.long_grasp import lying_long, slide_cle
 from pipeline.policies.scripted.recovery.nudge import palm_clear, push, push_plan
 from pipeline.policies.scripted.recovery.lying_cup import grasp_by_handle, lying_handle_grasp, place_by_handle
 from pipeline.policies.scripted.recovery.stand_book import quarter_turn, stand_tilt, stand_up, too_steep
-from pipeline.policies.scripted.scene import Scene
 from pipeline.policies.scripted.skills import place
 from pipeline.policies.scripted.stack import carried
+from pipeline.policies.scripted.strategies import PLACEMENTS
 
 TURN_TOL = 0.15  # radians of yaw still to turn at which the hand may go down to grasp
-TILT_COS = np.cos(np.radians(20))  # a region's plate tilted further from level than this (a rack's slot)
-TILT_MARGIN_M = 0.02  # ... a lying object's axis comes down this far beyond its radius out from it
+# a region's plate tilted from level by more than 20 and less than ~78 degrees (a rack's
+# slot; a shelf compartment's site is turned on its side, its own strategy places into it)
+TILT_COS, TILT_MIN_COS = np.cos(np.radians(20)), 0.2
+TILT_MARGIN_M = 0.02  # a lying object's axis comes down this far beyond its radius out from the plate
 
 
-def tilted_spot(s: Scene, obj: str, target: str) -> np.ndarray | None:
+def tilted_spot(ctx: Ctx, obj: str, target: str) -> np.ndarray | None:
     """Where a lying long object's body goes on a tilted region (the wine rack's top slot),
     or None for a level one. LIBERO's `On` there holds for a body origin up to 10 cm out from
     the plate along its normal (a row of the site's matrix: `SiteObject.under` multiplies by
     it, not its transpose) and within the plate's half size across it (the rack: 2.2 cm);
     the region's level box that `place` keeps to is 1.2 cm deep, and a bottle set down there
     landed on the slot's lip and rolled off it (measured). Out along the normal by its radius
-    and a margin, it comes down behind the lip, in the slot."""
+    and a margin, it comes down behind the lip, in the slot. None too where a placement
+    strategy takes the object its own way (`place` would ask it)."""
+    s = ctx.scene
     region = s.env.region(target)
     normal = region.mat[2]
-    if normal[2] > TILT_COS:
+    if not TILT_MIN_COS < normal[2] < TILT_COS or any(p.applies(ctx, obj, target) is not None for p in PLACEMENTS):
         return None
     return region.pos[:2] + normal[:2] * (s.box(obj).size[2] / 2 + TILT_MARGIN_M)
 
@@ -90,7 +94,7 @@ def pick_place_once(ctx: Ctx, conjunct: tuple[str, ...], attempt: int) -> Plan:
         # its body origin is at one end (a bottle's base): centre its length on the region
         # instead, or most of it hangs past one end and it slides off (measured: a bottle
         # laid on the rack by its base fell off behind it); a pan slid onto a shelf keeps its way
-        spot = tilted_spot(s, obj, target)
+        spot = tilted_spot(ctx, obj, target)
         if spot is None:
             yield from place(ctx, obj, target, shift=box_centre_offset(s, obj))
         else:
