@@ -41,7 +41,10 @@ LENGTHS = (0.05, 0.08, 0.11, 0.14)  # push lengths, shortest first
 SLIP_M = 0.02  # the object may lag the fist by this much (it turns, slides): planned clear without it
 GAP_M = 0.02  # the fist comes down this far behind the object
 PUSH_Z = 0.025  # grip site above the table while pushing (fingertips ~1.3 cm above it)
-FREE_PAD = 0.004  # neighbours' boxes padded by this much
+FREE_PAD = 0.004  # the hand keeps this far from neighbours' boxes
+# ... but the first attempt gives up the rays' grasp only for a palm this deep in a fixture
+# (an upright bottle's palm end grazes the rack's lip by a few mm, and its grasp is fine)
+FIXTURE_DEPTH_M = 0.01
 ABOVE_TABLE = 0.005  # boxes lower than this above the table top are the table (or a mat)
 
 
@@ -53,49 +56,86 @@ class Push:
     shift: np.ndarray  # the object's planned horizontal shift (x, y, 0)
 
 
-def _neighbours(scene: Scene, obj: str) -> list[tuple[str, np.ndarray]]:
+def _boxes(scene: Scene, obj: str) -> list[tuple[str, np.ndarray]]:
+    """World-aligned collision boxes of everything but `obj` above the table."""
     top = scene.table_height() + ABOVE_TABLE
     return [(n, b) for n, b in scene.obstacle_boxes({obj}) if b[1, 2] > top]
 
 
-def _hits(pos: np.ndarray, yaw: float, part, box: np.ndarray, along_off: float = 0.0, pad: float = FREE_PAD) -> bool:
-    """The hand `part` (a box in hand coordinates, moved `along_off` along the closing axis)
-    at grip site `pos` and `yaw` overlaps the world box `box` (separating axes in the plane)."""
-    (a0, a1), (c0, c1), (z0, z1) = part
-    if pos[2] + z1 < box[0, 2] - pad or pos[2] + z0 > box[1, 2] + pad:
-        return False
-    ax = closing_axis(yaw)[:2]
-    cx = np.array([-ax[1], ax[0]])
-    corners = np.array([pos[:2] + ax * (a + along_off) + cx * c for a in (a0, a1) for c in (c0, c1)])
-    lo, hi = box[0, :2] - pad, box[1, :2] + pad
-    if np.any(corners.max(axis=0) < lo) or np.any(corners.min(axis=0) > hi):
-        return False
-    rect = np.array([[lo[0], lo[1]], [lo[0], hi[1]], [hi[0], lo[1]], [hi[0], hi[1]]])
-    for axis, (u0, u1) in ((ax, (a0 + along_off, a1 + along_off)), (cx, (c0, c1))):
-        p = rect @ axis - pos[:2] @ axis
-        if p.max() < u0 or p.min() > u1:
-            return False
-    return True
+@dataclass(frozen=True)
+class Solids:
+    """Oriented collision boxes of a scene's things but one: owners, centres (n, 3), unit
+    axes as rows (n, 3, 3), half sizes (n, 3)."""
+
+    names: list[str]
+    centres: np.ndarray
+    axes: np.ndarray
+    halves: np.ndarray
 
 
-def palm_block(scene: Scene, obj: str, g: Grasp, shift: np.ndarray | None = None) -> list[str]:
-    """Neighbours of `obj` that the open hand's palm or fingers go into when grasping with
-    `g` (moved by `shift` with the object): a palm landing on a wall's top, which the
-    fingertip rays miss."""
-    pos = g.pos if shift is None else g.pos + shift
-    out = []
-    for name, box in _neighbours(scene, obj):
-        if name in out:
+def _solids(scene: Scene, obj: str) -> Solids:
+    """Everything but `obj` above the table, as oriented boxes: a tilted slat's world-aligned
+    box covers the air beside it (a rack's slats overlapped an upright bottle's palm box
+    that way, and its grasp was fine)."""
+    top = scene.table_height() + ABOVE_TABLE
+    names, centres, axes, halves = [], [], [], []
+    for name in scene.things():
+        if name == obj:
             continue
-        if (_hits(pos, g.yaw, PALM, box) or _hits(pos, g.yaw, WRIST, box)
-                or any(_hits(pos, g.yaw, FINGER, box, sg * FINGER_REACH) for sg in (-1, 1))):
-            out.append(name)
-    return out
+        for c in scene.env.object_corners(name).reshape(-1, 8, 3):
+            if c[:, 2].max() <= top:
+                continue
+            # corners run over signs (i, j, k) in (-1, 1)^3, k fastest (SimEnv.object_corners)
+            edges = np.array([c[4] - c[0], c[2] - c[0], c[1] - c[0]]) / 2
+            half = np.linalg.norm(edges, axis=1)
+            names.append(name)
+            centres.append(c.mean(axis=0))
+            axes.append(np.where(half[:, None] > 1e-9, edges / np.maximum(half, 1e-9)[:, None], np.eye(3)))
+            halves.append(half)
+    return Solids(names, np.array(centres).reshape(-1, 3), np.array(axes).reshape(-1, 3, 3),
+                  np.array(halves).reshape(-1, 3))
 
 
-def _clear(scene: Scene, obj: str, g: Grasp, shift: np.ndarray | None = None) -> bool:
+def _depths(pos: np.ndarray, yaw: float, part, solids: Solids, along_off: float = 0.0) -> np.ndarray:
+    """How far (m) the hand `part` (a box in hand coordinates, moved `along_off` along the
+    closing axis) at grip site `pos` and `yaw` goes into each solid: the least overlap over
+    the separating axes (negative: the gap, when apart)."""
+    (a0, a1), (c0, c1), (z0, z1) = part
+    ax = closing_axis(yaw)
+    hand_axes = np.array([ax, [-ax[1], ax[0], 0.0], [0.0, 0.0, 1.0]])
+    hand_half = np.array([a1 - a0, c1 - c0, z1 - z0]) / 2
+    hand_centre = pos + hand_axes.T @ np.array([(a0 + a1) / 2 + along_off, (c0 + c1) / 2, (z0 + z1) / 2])
+    d = solids.centres - hand_centre
+    depth = np.full(len(solids.names), np.inf)
+    tests = [np.broadcast_to(t, d.shape) for t in hand_axes]
+    tests += [solids.axes[:, i] for i in range(3)]
+    tests += [np.cross(u, solids.axes[:, i]) for u in hand_axes for i in range(3)]
+    for t in tests:
+        n = np.linalg.norm(t, axis=1)
+        ok = n > 1e-6
+        t = t / np.maximum(n, 1e-6)[:, None]
+        reach = np.abs(t @ hand_axes.T) @ hand_half + np.sum(np.abs(np.einsum("nij,nj->ni", solids.axes, t)) * solids.halves, axis=1)
+        gap = reach - np.abs(np.sum(d * t, axis=1))
+        depth = np.where(ok, np.minimum(depth, gap), depth)
+    return depth
+
+
+def palm_block(scene: Scene, obj: str, g: Grasp, shift: np.ndarray | None = None, pad: float = FREE_PAD,
+               solids: Solids | None = None) -> list[str]:
+    """Neighbours of `obj` that the open hand's palm or fingers go into (or come within `pad`
+    of; a negative `pad`: go deeper into than that) when grasping with `g` (moved by `shift`
+    with the object): a palm landing on a wall's top, which the fingertip rays miss."""
+    solids = _solids(scene, obj) if solids is None else solids
+    pos = g.pos if shift is None else g.pos + shift
+    depth = np.maximum(_depths(pos, g.yaw, PALM, solids), _depths(pos, g.yaw, WRIST, solids))
+    for sg in (-1, 1):
+        depth = np.maximum(depth, _depths(pos, g.yaw, FINGER, solids, sg * FINGER_REACH))
+    return sorted({n for n, dep in zip(solids.names, depth) if dep > -pad})
+
+
+def _clear(scene: Scene, obj: str, g: Grasp, solids: Solids, shift: np.ndarray | None = None) -> bool:
     moved = g if shift is None else Grasp(pos=g.pos + shift, yaw=g.yaw, rim=g.rim)
-    return not palm_block(scene, obj, g, shift) and not checks.tip_blockers(scene, obj, moved, set())
+    return not palm_block(scene, obj, g, shift, solids=solids) and not checks.tip_blockers(scene, obj, moved, set())
 
 
 def palm_clear(scene: Scene, obj: str, dest: np.ndarray | None, attempt: int) -> tuple[int, Grasp] | None:
@@ -104,15 +144,16 @@ def palm_clear(scene: Scene, obj: str, dest: np.ndarray | None, attempt: int) ->
     when they see a clear candidate whose palm meets no fixture (a palm's edge brushing a
     light object only nudges it; a rack or a cabinet stops the descent); after a failed
     attempt the palm counts whatever it meets."""
+    solids = _solids(scene, obj)
     rays = checks.clear_grasp_choice(scene, obj, dest, attempt, TRIES)
     g = slide_clear(scene, obj, plan_grasp(scene, obj, dest, rays))
     if (attempt == 0 and not checks.tip_blockers(scene, obj, g, set())
-            and not set(palm_block(scene, obj, g)) & set(scene.env.fixture_names)):
+            and not set(palm_block(scene, obj, g, pad=-FIXTURE_DEPTH_M, solids=solids)) & set(scene.env.fixture_names)):
         return rays, g
     for k in range(attempt, attempt + TRIES):
         g = plan_grasp(scene, obj, dest, k)
         for h in [slide_clear(scene, obj, g), *slides(scene, obj, g)]:
-            if _clear(scene, obj, h):
+            if _clear(scene, obj, h, solids):
                 return k, h
     return None
 
@@ -132,10 +173,10 @@ def _pushed_into(scene: Scene, obj: str, shift: np.ndarray, boxes) -> bool:
     return False
 
 
-def _hand_path_clear(pos: np.ndarray, end: np.ndarray, yaw: float, boxes) -> bool:
+def _hand_path_clear(pos: np.ndarray, end: np.ndarray, yaw: float, solids: Solids) -> bool:
     for t in np.linspace(0.0, 1.0, 6):
         p = (1 - t) * pos + t * end
-        if any(_hits(p, yaw, part, box) for part in (FIST, PALM, WRIST) for _, box in boxes):
+        if any(np.any(_depths(p, yaw, part, solids) > -FREE_PAD) for part in (FIST, PALM, WRIST)):
             return False
     return True
 
@@ -145,7 +186,7 @@ def push_plan(scene: Scene, obj: str, dest: np.ndarray | None) -> Push | None:
     fist comes down behind it and pushes straight, the hand clear of every neighbour and
     the object driven into none; ties go to the end nearest the arm's home. None: no push
     frees it."""
-    boxes = _neighbours(scene, obj)
+    boxes, solids = _boxes(scene, obj), _solids(scene, obj)
     corners = scene.env.object_corners(obj)[:, :2]
     centre = scene.box(obj).centre
     z = scene.table_height() + PUSH_Z
@@ -163,7 +204,7 @@ def push_plan(scene: Scene, obj: str, dest: np.ndarray | None) -> Push | None:
                 continue
             if _pushed_into(scene, obj, shift, boxes):
                 continue
-            if not any(_clear(scene, obj, g, u * (length - SLIP_M)) for g in cands):
+            if not any(_clear(scene, obj, g, solids, u * (length - SLIP_M)) for g in cands):
                 continue
             back = float((corners @ u[:2]).min())
             mid = float((corners @ across[:2]).mean())
@@ -175,7 +216,7 @@ def push_plan(scene: Scene, obj: str, dest: np.ndarray | None) -> Push | None:
                 start = u * (back - GAP_M - FIST[0][1]) + across * (mid + off)
                 start[2] = z
                 end = start + u * (GAP_M + length)
-                if not _hand_path_clear(start, end, yaw, boxes):
+                if not _hand_path_clear(start, end, yaw, solids):
                     continue
                 cost = float(np.linalg.norm(end_xy - home))
                 if best is None or cost < best[0]:
