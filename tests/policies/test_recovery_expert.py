@@ -338,3 +338,24 @@ def test_a_far_bowl_is_grasped_from_a_higher_hover(tmp_path):
     out = tune26_attempt(tmp_path, "libero_spatial", "pick_up_the_black_bowl_on_the_cookie_box_and_place_it_on_the_plate",
                          1087795790, 155)
     assert out.success and out.steps <= 300, out
+
+
+@pytest.mark.sim
+def test_an_object_lying_against_a_basket_wall_is_pushed_clear_then_grasped(tmp_path):
+    """A tuning run's scene (libero_object, init state 4, default noise, step 296): the
+    pudding lies 1.6 cm before the basket's front wall, so every grasp candidate puts a
+    finger and the palm onto the wall; every descent stopped there until the horizon. It is
+    pushed along the wall, clear of it, then grasped (~200 steps)."""
+    out = tune26_attempt(tmp_path, "libero_object", "pick_up_the_chocolate_pudding_and_place_it_in_the_basket", 19454025, 296)
+    assert out.success and out.steps <= 300, out
+
+
+@pytest.mark.sim
+def test_a_bottle_lying_beside_the_wine_rack_is_grasped_clear_of_it_and_laid_in_its_top_slot(tmp_path):
+    """A tuning run's scene (libero_goal, init state 4, default noise, step 73): the toppled
+    bottle lies beside the rack. The fingertip rays saw its grasp clear, but the palm came
+    down on the rack's slats (the grasp is slid along the bottle, clear of them), and the
+    bottle, set down in the tilted slot's level box, landed on the slot's lip and rolled off
+    (it is aimed out along the slot's plate, behind the lip). Both: a timeout before."""
+    out = tune26_attempt(tmp_path, "libero_goal", "put_the_wine_bottle_on_the_rack", 875160940, 73)
+    assert out.success and out.steps <= 380, out

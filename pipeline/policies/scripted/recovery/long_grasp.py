@@ -23,15 +23,40 @@ SHIFTS = (0.015, 0.03, 0.045)  # along the object's length, either way, nearest 
 END_MARGIN = 0.035  # the grasp point keeps this far inside the object's ends
 
 
-def slide_clear(scene: Scene, obj: str, g: Grasp) -> Grasp:
+def _length(scene: Scene, obj: str, g: Grasp) -> tuple[np.ndarray, np.ndarray] | None:
+    """The horizontal direction across `g`'s closing axis and the object's corners' span
+    along it, when the object is long that way (None for a rim grasp or a short object)."""
     if g.rim:
-        return g
-    corners = scene.env.object_corners(obj)
+        return None
     ax = closing_axis(g.yaw)
     along = np.array([ax[1], -ax[0]])
-    span = corners[:, :2] @ along
-    if float(np.ptp(span)) <= LONG_M:
+    span = scene.env.object_corners(obj)[:, :2] @ along
+    return (along, span) if float(np.ptp(span)) > LONG_M else None
+
+
+def slides(scene: Scene, obj: str, g: Grasp) -> list[Grasp]:
+    """`g` slid along a long object's length by SHIFTS, either way, nearest first, keeping
+    END_MARGIN inside its ends (the palm-box test of nudge.py tries them)."""
+    length = _length(scene, obj, g)
+    if length is None:
+        return []
+    along, span = length
+    here = float(g.pos[:2] @ along)
+    out = []
+    for d in SHIFTS:
+        for sign in (-1.0, 1.0):
+            if span.min() + END_MARGIN <= here + sign * d <= span.max() - END_MARGIN:
+                pos = g.pos.copy()
+                pos[:2] += along * sign * d
+                out.append(Grasp(pos=pos, yaw=g.yaw, rim=False))
+    return out
+
+
+def slide_clear(scene: Scene, obj: str, g: Grasp) -> Grasp:
+    length = _length(scene, obj, g)
+    if length is None:
         return g
+    along, span = length
     top = scene.box(obj).hi[2]
     block = blocked_depth(scene, g.pos, g.yaw, top, skip_tips=True)
     if block <= BLOCKED_M:

@@ -3,8 +3,9 @@
 Attempt k > 0 grasps differently: the k-th best grasp candidate (another yaw or rim side,
 for side-lying bottles and mugs as for upright ones), approached from higher up, with the
 retry shift of `variation.RetryNoise`. A book that leans or lies tilted is picked up by its
-top edge with a tilted hand and turned upright in the hand (stand_book.py). The planner
-calls it again from the live state.
+top edge with a tilted hand and turned upright in the hand (stand_book.py). An object no
+grasp reaches clear of its neighbours is first pushed clear (nudge.py). The planner calls
+it again from the live state.
 """
 
 from __future__ import annotations
@@ -12,15 +13,17 @@ from __future__ import annotations
 import numpy as np
 
 from pipeline.policies.scripted.grasps import plan_grasp
-from pipeline.policies.scripted.motion import Ctx, Plan, free_hand, grasp
+from pipeline.policies.scripted.motion import Ctx, Plan, free_hand, grasp, place_at
 from pipeline.policies.scripted.notes import Note, Outcome
-from pipeline.policies.scripted.placement import box_centre_offset, destination
+from pipeline.policies.scripted.placement import box_centre_offset, destination, support_ceiling
 from pipeline.policies.scripted.recovery import checks
 from pipeline.policies.scripted.recovery.long_grasp import lying_long, slide_clear
+from pipeline.policies.scripted.recovery.nudge import palm_clear, push, push_plan
 from pipeline.policies.scripted.recovery.lying_cup import grasp_by_handle, lying_handle_grasp, place_by_handle
 from pipeline.policies.scripted.recovery.stand_book import quarter_turn, stand_tilt, stand_up, too_steep
 from pipeline.policies.scripted.skills import place
 from pipeline.policies.scripted.stack import carried
+from pipeline.policies.scripted.strategies import PLACEMENTS
 
 TURN_TOL = 0.15  # radians of yaw still to turn at which the hand may go down to grasp
 # a grasp this far (horizontally) from the robot base hovers at least FAR_HOVER_M over it:
@@ -37,6 +40,29 @@ def hover_height(s, grip: np.ndarray, attempt: int) -> float:
     hover = 0.08 + 0.03 * min(attempt, 2)
     far = float(np.linalg.norm(grip[:2] - checks.robot_base(s)[:2])) > FAR_M
     return max(hover, FAR_HOVER_M) if far else hover
+
+
+# a region's plate tilted from level by more than 20 and less than ~78 degrees (a rack's
+# slot; a shelf compartment's site is turned on its side, its own strategy places into it)
+TILT_COS, TILT_MIN_COS = np.cos(np.radians(20)), 0.2
+TILT_MARGIN_M = 0.02  # a lying object's axis comes down this far beyond its radius out from the plate
+
+
+def tilted_spot(ctx: Ctx, obj: str, target: str) -> np.ndarray | None:
+    """Where a lying long object's body goes on a tilted region (the wine rack's top slot),
+    or None for a level one. LIBERO's `On` there holds for a body origin up to 10 cm out from
+    the plate along its normal (a row of the site's matrix: `SiteObject.under` multiplies by
+    it, not its transpose) and within the plate's half size across it (the rack: 2.2 cm);
+    the region's level box that `place` keeps to is 1.2 cm deep, and a bottle set down there
+    landed on the slot's lip and rolled off it (measured). Out along the normal by its radius
+    and a margin, it comes down behind the lip, in the slot. None too where a placement
+    strategy takes the object its own way (`place` would ask it)."""
+    s = ctx.scene
+    region = s.env.region(target)
+    normal = region.mat[2]
+    if not TILT_MIN_COS < normal[2] < TILT_COS or any(p.applies(ctx, obj, target) is not None for p in PLACEMENTS):
+        return None
+    return region.pos[:2] + normal[:2] * (s.box(obj).size[2] / 2 + TILT_MARGIN_M)
 
 
 def pick_place_once(ctx: Ctx, conjunct: tuple[str, ...], attempt: int) -> Plan:
@@ -61,10 +87,18 @@ def pick_place_once(ctx: Ctx, conjunct: tuple[str, ...], attempt: int) -> Plan:
         else:
             yield from free_hand(ctx)
             dest = destination(ctx.scene, obj, target)
-            # a candidate whose fingers land clear of other objects (they would be clamped too)
-            choice = checks.clear_grasp_choice(s, obj, dest, attempt)
-            g = slide_clear(s, obj, plan_grasp(s, obj, dest, choice))
-            yield from grasp(ctx, obj, dest, choice=choice, g=g, hover_m=hover_height(s, g.pos, attempt), turn_tol=TURN_TOL)
+            # a candidate whose fingers (and palm) land clear of other objects (they would be
+            # clamped too); none: push the object clear of its neighbour first (nudge.py)
+            found = palm_clear(s, obj, dest, attempt)
+            if found is None and (shove := push_plan(s, obj, dest)) is not None:
+                yield from push(ctx, obj, shove)
+                dest = destination(ctx.scene, obj, target)
+                found = palm_clear(s, obj, dest, attempt)
+            if found is None:
+                choice = checks.clear_grasp_choice(s, obj, dest, attempt)
+                found = choice, slide_clear(s, obj, plan_grasp(s, obj, dest, choice))
+            yield from grasp(ctx, obj, dest, choice=found[0], g=found[1], hover_m=hover_height(s, found[1].pos, attempt),
+                             turn_tol=TURN_TOL)
         if not carried(s, obj, checks.held(s)):
             ctx.events.append(Note(Outcome.MISSED_GRASP, obj))
             if ctx.truth is not None:
@@ -76,7 +110,11 @@ def pick_place_once(ctx: Ctx, conjunct: tuple[str, ...], attempt: int) -> Plan:
         # its body origin is at one end (a bottle's base): centre its length on the region
         # instead, or most of it hangs past one end and it slides off (measured: a bottle
         # laid on the rack by its base fell off behind it); a pan slid onto a shelf keeps its way
-        yield from place(ctx, obj, target, shift=box_centre_offset(s, obj))
+        spot = tilted_spot(ctx, obj, target)
+        if spot is None:
+            yield from place(ctx, obj, target, shift=box_centre_offset(s, obj))
+        else:
+            yield from place_at(ctx, obj, spot - box_centre_offset(s, obj), support_ceiling(s.env, target))
     else:
         yield from place(ctx, obj, target, stand=True)
     if ctx.truth is not None:
