@@ -299,3 +299,31 @@ def test_a_frying_pan_is_set_down_with_its_origin_on_the_cook_region(tmp_path):
     finally:
         env.close()
     assert out.success, (out, pan)
+
+
+def tuning_scene(tmp_path, suite: str, task: str, seed: int, step: int, horizon: int):
+    """The recovery expert from a tuning run's scene (`tune26`: init state 4, default noise),
+    made again by stage 1's own code; its outcome."""
+    from pipeline.release.experts import attempt, recovery_expert
+    from pipeline.sim import get_task
+    from tests.stage1.default_episode import default_episode
+
+    env = build_env(get_task(suite, task))
+    try:
+        folder = default_episode(env, tmp_path, suite, task, 4, seed, horizon=step)
+        scene = np.load(folder / "states.npy")[step]
+        return attempt(env, scene, recovery_expert(env, 0, 0.0), 0, horizon, 8)
+    finally:
+        env.close()
+
+
+@pytest.mark.sim
+def test_a_wrist_pinned_at_its_limit_is_unwound_before_the_grasp(tmp_path):
+    """libero_object, alphabet soup into the basket, step 186: the failing rollout flipped
+    joint 5 by 2.6 rad and left joint 6 at 3.75 of 3.75 rad; no hand motion levels the hand
+    from there (10 deg tilted, every grasp missed until the horizon). Unwound along the
+    joint path to the home joints, the task is done in ~210 steps."""
+    out = tuning_scene(tmp_path, "libero_object", "pick_up_the_alphabet_soup_and_place_it_in_the_basket",
+                       2015380134, 186, horizon=320)
+    assert out.success, out
+

@@ -24,6 +24,7 @@ JOINT_MARGIN = 0.15  # radians from a joint limit that count as an awkward pose
 # controller can no longer pull the hand back (measured: stuck 80 steps, 20 cm short of home)
 ELBOW_STRAIGHT = 0.4
 ELBOW_LOCKED = 0.06  # ... and this close it is locked: only tilting the hand bends it again
+WRIST = slice(4, 7)  # the wrist joints (5, 6, 7)
 PALM_HALF_M = 0.03  # the palm's half width across its closing axis (its box: 3.2 cm)
 SAFE_Z = 0.16  # grip site above the table top from which any approach may start
 # comfortable region of the grip site (x, y), relative to the robot base
@@ -69,6 +70,14 @@ def awkward_arm(scene: Scene) -> bool:
     if np.any(rel < COMFORT_XY[0]) or np.any(rel > COMFORT_XY[1]):
         return True
     return float(-rot[2, 2]) < np.cos(np.radians(25))  # grip axis more than 25 deg off vertical
+
+
+def wrist_pinned(scene: Scene) -> bool:
+    """A wrist joint within JOINT_MARGIN of its limit: the hand cannot turn or level past
+    it, whatever the hand's position (a failing rollout flipped joint 5 by ~2.6 rad and left
+    joint 6 at 3.75 of 3.75 rad: the hand stayed 10 deg tilted and every grasp missed)."""
+    qs, limits = scene.env.arm_joints()
+    return any(min(q - lo, hi - q) < JOINT_MARGIN for q, (lo, hi) in zip(qs[WRIST], limits[WRIST]))
 
 
 def _elbow_slack(scene: Scene) -> float:

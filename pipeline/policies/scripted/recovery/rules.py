@@ -31,12 +31,14 @@ from pipeline.policies.scripted.recovery.pick_place import pick_place_once
 from pipeline.policies.scripted.recovery.put_aside import put_aside
 from pipeline.policies.scripted.recovery.reasons import GiveUp, GiveUpReason
 from pipeline.policies.scripted.recovery.under_drawer import clear_from_under
+from pipeline.policies.scripted.recovery.unwind import unwind
 from pipeline.policies.scripted.recovery.variation import RetryNoise
 from pipeline.policies.scripted.stack import carried
 
 OPEN_FULL = 0.85  # a drawer this far open (of its range) lets a hand reach all of its inside
 MAX_TRIES = 4  # attempts per subgoal (each one different)
 MAX_ASIDE = 2  # times one obstruction is moved aside
+MAX_UNWIND = 2  # times the arm is unwound to its home joints in one episode
 FLAT_M = 0.04  # objects lower than this are grasped with the palm near the table
 
 
@@ -56,6 +58,7 @@ class Round:
     tries: Counter  # attempts per subgoal
     aside: Counter  # times each object was moved aside
     shut: Counter  # drawers closed because they overhung a goal object
+    unwound: Counter  # times the pinned wrist was unwound (key: "wrist")
     movers: list[str] = field(init=False)  # goal objects still to be moved
     held: str | None = field(init=False)
 
@@ -99,6 +102,16 @@ def put_held_aside(r: Round, _: bool) -> Plan:
     if r.aside[r.held] > MAX_ASIDE + 1:
         raise GiveUp(GiveUpReason.RETRIES_EXHAUSTED, f"could not put {r.held} aside")
     yield from put_aside(r.ctx, r.held, r.aside[r.held] - 1)
+
+
+def wrist_pinned(r: Round) -> bool | None:
+    return True if checks.wrist_pinned(r.ctx.scene) and r.unwound["wrist"] < MAX_UNWIND else None
+
+
+def unwind_arm(r: Round, _: bool) -> Plan:
+    r.unwound["wrist"] += 1
+    debug("unwind the wrist", r.ctx.scene.env.arm_joints()[0].round(2))
+    yield from unwind(r.ctx)
 
 
 def closed_on_nothing(r: Round) -> bool | None:
@@ -245,6 +258,7 @@ def attempt(r: Round, _: bool) -> Plan:
 RULES: tuple[Rule, ...] = (
     Rule("goal object off the table or out of reach", hopeless, give_up),
     Rule("the hand holds an object the subgoal does not use", holds_another, put_held_aside),
+    Rule("a wrist joint is pinned at its limit", wrist_pinned, unwind_arm, replan=False),
     Rule("the hand closed on nothing", closed_on_nothing, open_hand, replan=False),
     Rule("an open drawer overhangs the object to go into it", overhanging_drawer, back_out_then_clear_from_under),
     Rule("the arm touches something, sits low or awkwardly", always, arm_back, replan=False),
