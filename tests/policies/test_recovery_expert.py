@@ -327,3 +327,14 @@ def test_a_wrist_pinned_at_its_limit_is_unwound_before_the_grasp(tmp_path):
                        2015380134, 186, horizon=320)
     assert out.success, out
 
+
+@pytest.mark.sim
+def test_a_drawer_pushed_shut_by_the_back_out_is_opened_again_without_setting_the_bowl_aside(tmp_path):
+    """libero_90 KITCHEN_SCENE5, the bowl into the top drawer, step 116: pulling the
+    stretched arm in pushed the open drawer half shut, and the round went on to put the bowl
+    into it (it fell off the front). The round now ends when a back-out moved a part; and
+    the bowl, 3 cm before the opened drawer's front and 10 cm under its floor, is not set
+    aside before the drawer is opened again (~350 steps)."""
+    out = tuning_scene(tmp_path, "libero_90", "KITCHEN_SCENE5_put_the_black_bowl_in_the_top_drawer_of_the_cabinet",
+                       993743582, 116, horizon=420)
+    assert out.success, out

@@ -263,6 +263,39 @@ def proud_in_drawer(scene: Scene, joint: str, margin: float = 0.01) -> list[str]
     return out
 
 
+FLOOR_CLEAR_M = 0.02  # a drawer's floor this far over an object's top passes over it
+HAND_HEIGHT_M = 0.15  # grip site to the top of the hand coming down on a grasp
+
+
+def drawer_opened(scene: Scene, joint: str) -> np.ndarray:
+    """(2, 3) box of the drawer of a slide `joint` pulled fully out."""
+    fr = scene.env.joint_frame(joint)
+    open_q = fr.range[0] if abs(fr.range[0]) > abs(fr.range[1]) else fr.range[1]
+    boxes = scene.env.joint_part_boxes(joint) + fr.axis * (open_q - fr.qpos)
+    return np.array([boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0)])
+
+
+def sweep_spares(scene: Scene, obj: str, joint: str, grasp) -> bool:
+    """Opening the drawer of slide `joint` leaves `obj` alone and graspable by `grasp`: its
+    floor passes over the object's top clear, and the opened drawer is either a hand's
+    height over the grasp or clear of where the palm and the object are (see `grasp_blockers`
+    for the palm). `under_sweep` pads the object by a hand's reach; a bowl beside a cabinet
+    whose open drawer ended 3 cm before it, 10 cm over its rim, was set aside (~160 steps)."""
+    sweep = drawer_sweep(scene, joint)
+    b = scene.box(obj)
+    if sweep is None or sweep[0, 2] < b.hi[2] + FLOOR_CLEAR_M:
+        return False
+    opened = drawer_opened(scene, joint)
+    if opened[0, 2] > grasp.pos[2] + HAND_HEIGHT_M:
+        return True
+    ax = closing_axis(grasp.yaw)
+    side = np.array([-ax[1], ax[0], 0.0])
+    palm = [grasp.pos + sg * ax * r + t * side * PALM_HALF_M
+            for sg in (-1, 1) for r in (0.0, 0.05, 0.1) for t in (-1, 1)]
+    in_palm = any(np.all(opened[0, :2] - 0.005 <= p[:2]) and np.all(p[:2] <= opened[1, :2] + 0.005) for p in palm)
+    return not in_palm and not _overlap(np.array([b.lo, b.hi]), opened, pad=0.02)
+
+
 def under_sweep(scene: Scene, obj: str, sweep: np.ndarray, margin: float = 0.05) -> bool:
     """The opened drawer would overhang `obj` (or the hand grasping it, `margin`)."""
     b = scene.box(obj)

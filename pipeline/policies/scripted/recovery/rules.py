@@ -34,10 +34,12 @@ from pipeline.policies.scripted.recovery.under_drawer import clear_from_under
 from pipeline.policies.scripted.recovery.unwind import unwind
 from pipeline.policies.scripted.recovery.variation import RetryNoise
 from pipeline.policies.scripted.stack import carried
+from pipeline.sim.facts import JointKind
 
 OPEN_FULL = 0.85  # a drawer this far open (of its range) lets a hand reach all of its inside
 MAX_TRIES = 4  # attempts per subgoal (each one different)
 MAX_ASIDE = 2  # times one obstruction is moved aside
+PART_MOVED = 0.01  # metres (or radians) a part may move while the arm backs out, the round still fresh
 MAX_UNWIND = 2  # times the arm is unwound to its home joints in one episode
 FLAT_M = 0.04  # objects lower than this are grasped with the palm near the table
 
@@ -61,6 +63,7 @@ class Round:
     unwound: Counter  # times the pinned wrist was unwound (key: "wrist")
     movers: list[str] = field(init=False)  # goal objects still to be moved
     held: str | None = field(init=False)
+    stale: bool = field(init=False, default=False)  # a remedy changed what the round read: end it
 
     def __post_init__(self) -> None:
         s = self.ctx.scene
@@ -145,9 +148,26 @@ def always(r: Round) -> bool:
     return True
 
 
+def part_positions(env) -> dict[str, float]:
+    """Every drawer's, door's and knob's joint position."""
+    return {j: env.joint_position(j) for f in env.fixture_names for j in env.fixture_joints(f)
+            if env.joint_frame(j).kind in (JointKind.SLIDE, JointKind.HINGE)}
+
+
 def arm_back(r: Round, _: bool) -> Plan:
-    """Back the arm out when it touches something, sits low or awkwardly (back_out looks)."""
+    """Back the arm out when it touches something, sits low or awkwardly (back_out looks).
+    A back-out that moved a part (the arm pulled in across a cabinet pushes its open drawer
+    half shut) makes the round stale: its subgoal was read with the part where it was
+    (measured: the bowl then went into a drawer no longer open, fell off its front, and the
+    episode ran out setting it aside from under the drawer)."""
+    env = r.ctx.scene.env
+    before = part_positions(env)
     yield from back_out(r.ctx)
+    after = part_positions(env)
+    moved = [j for j in before if abs(after[j] - before[j]) > PART_MOVED]
+    if moved:
+        debug("the back-out moved", moved, "- replan")
+        r.stale = True
 
 
 def in_the_way(r: Round) -> str | None:
@@ -190,7 +210,8 @@ def under_the_opening_drawer(r: Round) -> tuple[str, np.ndarray] | None:
             and articulated.is_closed_enough(s.env, sub[1])):  # (an open one only goes a little further)
         return None
     sweep = checks.drawer_sweep(s, joint)
-    under = [m for m in r.movers if sweep is not None and checks.under_sweep(s, m, sweep) and r.aside[m] < MAX_ASIDE]
+    under = [m for m in r.movers if sweep is not None and checks.under_sweep(s, m, sweep) and r.aside[m] < MAX_ASIDE
+             and not checks.sweep_spares(s, m, joint, plan_grasp(s, m))]  # (its first grasp)
     if under:
         debug("aside before opening", under)
     return (under[0], sweep) if under else None
