@@ -392,6 +392,27 @@ class SimEnv:
         ids = [m.joint_name2id(f"robot0_joint{i}") for i in range(1, 8)]
         return np.array([sim.data.qpos[m.jnt_qposadr[j]] for j in ids]), np.array([m.jnt_range[j] for j in ids])
 
+    def arm_home(self) -> np.ndarray:
+        """The arm's home joints (7,): the start pose, which the OSC controller's null space
+        pulls the arm toward (robosuite's `initial_joint`)."""
+        return np.array(self.env.robots[0].controller.initial_joint, dtype=float)
+
+    def eef_pose_at(self, joints: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Grip-site position (3,) and rotation (3, 3) with the arm at `joints` (7,) and the
+        rest of the scene as it is now: forward kinematics on a scratch copy (the live state
+        is not touched)."""
+        import mujoco
+
+        sim = self.env.sim
+        m = sim.model
+        data = mujoco.MjData(m._model)
+        data.qpos[:] = sim.data._data.qpos
+        ids = [m.joint_name2id(f"robot0_joint{i}") for i in range(1, 8)]
+        data.qpos[[m.jnt_qposadr[j] for j in ids]] = joints
+        mujoco.mj_kinematics(m._model, data)
+        site = self.env.robots[0].eef_site_id
+        return np.array(data.site_xpos[site]), np.array(data.site_xmat[site]).reshape(3, 3)
+
     def eef_hand_quat(self) -> np.ndarray:
         """robosuite's `robot0_eef_quat` (x, y, z, w): MuJoCo's quaternion of the hand body,
         with MuJoCo's sign, which VLA policies trained on LIBERO data expect in their state

@@ -301,10 +301,10 @@ def test_a_frying_pan_is_set_down_with_its_origin_on_the_cook_region(tmp_path):
     assert out.success, (out, pan)
 
 
-def tune26_attempt(tmp_path, suite: str, task: str, seed: int, step: int):
+def tune26_attempt(tmp_path, suite: str, task: str, seed: int, step: int, horizon: int = 520):
     """Remake a tuning run's (tune26: init state 4, default noise) failure scene at `step` by
-    stage 1's own code and run the zero-noise recovery expert from it with the release's
-    horizon; its `Outcome`."""
+    stage 1's own code and run the zero-noise recovery expert from it with `horizon`
+    (the release's by default); its `Outcome`."""
     from pipeline.release.experts import attempt, recovery_expert
     from pipeline.sim import get_task
     from tests.stage1.default_episode import default_episode
@@ -313,7 +313,7 @@ def tune26_attempt(tmp_path, suite: str, task: str, seed: int, step: int):
     try:
         folder = default_episode(env, tmp_path, suite, task, 4, seed, horizon=step)
         scene = np.load(folder / "states.npy")[step]
-        return attempt(env, scene, recovery_expert(env, 0, 0.0), 0, 520, 8)
+        return attempt(env, scene, recovery_expert(env, 0, 0.0), 0, horizon, 8)
     finally:
         env.close()
 
@@ -359,3 +359,26 @@ def test_a_bottle_lying_beside_the_wine_rack_is_grasped_clear_of_it_and_laid_in_
     (it is aimed out along the slot's plate, behind the lip). Both: a timeout before."""
     out = tune26_attempt(tmp_path, "libero_goal", "put_the_wine_bottle_on_the_rack", 875160940, 73)
     assert out.success and out.steps <= 380, out
+
+
+@pytest.mark.sim
+def test_a_wrist_pinned_at_its_limit_is_unwound_before_the_grasp(tmp_path):
+    """libero_object, alphabet soup into the basket, step 186: the failing rollout flipped
+    joint 5 by 2.6 rad and left joint 6 at 3.75 of 3.75 rad; no hand motion levels the hand
+    from there (10 deg tilted, every grasp missed until the horizon). Unwound along the
+    joint path to the home joints, the task is done in ~210 steps."""
+    out = tune26_attempt(tmp_path, "libero_object", "pick_up_the_alphabet_soup_and_place_it_in_the_basket",
+                         2015380134, 186, horizon=320)
+    assert out.success, out
+
+
+@pytest.mark.sim
+def test_a_drawer_pushed_shut_by_the_back_out_is_opened_again_without_setting_the_bowl_aside(tmp_path):
+    """libero_90 KITCHEN_SCENE5, the bowl into the top drawer, step 116: pulling the
+    stretched arm in pushed the open drawer half shut, and the round went on to put the bowl
+    into it (it fell off the front). The round now ends when a back-out moved a part; and
+    the bowl, 3 cm before the opened drawer's front and 10 cm under its floor, is not set
+    aside before the drawer is opened again (~350 steps)."""
+    out = tune26_attempt(tmp_path, "libero_90", "KITCHEN_SCENE5_put_the_black_bowl_in_the_top_drawer_of_the_cabinet",
+                         993743582, 116, horizon=420)
+    assert out.success, out

@@ -77,6 +77,7 @@ class Move:
     gain: float = 1.5
     rot_tol: float | None = None  # also wait for the orientation to be reached (radians)
     approach: np.ndarray | None = None  # horizontal pointing direction for a tilted hand
+    orient: np.ndarray | None = None  # a grip-site rotation (3, 3) instead of yaw / approach
     label: str = "move"
     steps: int = field(default=0, init=False)
 
@@ -87,8 +88,11 @@ class Move:
             return False
         if self.rot_tol is None:
             return True
-        err = rotation_error(hand_orientation(self.yaw, self.approach), rot)
+        err = rotation_error(self.orientation(), rot)
         return float(np.linalg.norm(err)) < self.rot_tol
+
+    def orientation(self) -> np.ndarray:
+        return hand_orientation(self.yaw, self.approach) if self.orient is None else self.orient
 
 
 @dataclass
@@ -112,7 +116,7 @@ def emit(
     out = []
     p = eef.copy()
     if isinstance(prim, Move):
-        want = hand_orientation(prim.yaw, prim.approach)
+        want = prim.orientation()
     else:
         want = hand_orientation(yaw_hold, approach_hold)
     rot_err = rotation_error(want, rot)

@@ -24,6 +24,7 @@ JOINT_MARGIN = 0.15  # radians from a joint limit that count as an awkward pose
 # controller can no longer pull the hand back (measured: stuck 80 steps, 20 cm short of home)
 ELBOW_STRAIGHT = 0.4
 ELBOW_LOCKED = 0.06  # ... and this close it is locked: only tilting the hand bends it again
+WRIST = slice(4, 7)  # the wrist joints (5, 6, 7)
 PALM_HALF_M = 0.03  # the palm's half width across its closing axis (its box: 3.2 cm)
 SAFE_Z = 0.16  # grip site above the table top from which any approach may start
 # comfortable region of the grip site (x, y), relative to the robot base
@@ -69,6 +70,14 @@ def awkward_arm(scene: Scene) -> bool:
     if np.any(rel < COMFORT_XY[0]) or np.any(rel > COMFORT_XY[1]):
         return True
     return float(-rot[2, 2]) < np.cos(np.radians(25))  # grip axis more than 25 deg off vertical
+
+
+def wrist_pinned(scene: Scene) -> bool:
+    """A wrist joint within JOINT_MARGIN of its limit: the hand cannot turn or level past
+    it, whatever the hand's position (a failing rollout flipped joint 5 by ~2.6 rad and left
+    joint 6 at 3.75 of 3.75 rad: the hand stayed 10 deg tilted and every grasp missed)."""
+    qs, limits = scene.env.arm_joints()
+    return any(min(q - lo, hi - q) < JOINT_MARGIN for q, (lo, hi) in zip(qs[WRIST], limits[WRIST]))
 
 
 def _elbow_slack(scene: Scene) -> float:
@@ -252,6 +261,39 @@ def proud_in_drawer(scene: Scene, joint: str, margin: float = 0.01) -> list[str]
         if inside and b.hi[2] > hi[2] + margin:
             out.append(o)
     return out
+
+
+FLOOR_CLEAR_M = 0.02  # a drawer's floor this far over an object's top passes over it
+HAND_HEIGHT_M = 0.15  # grip site to the top of the hand coming down on a grasp
+
+
+def drawer_opened(scene: Scene, joint: str) -> np.ndarray:
+    """(2, 3) box of the drawer of a slide `joint` pulled fully out."""
+    fr = scene.env.joint_frame(joint)
+    open_q = fr.range[0] if abs(fr.range[0]) > abs(fr.range[1]) else fr.range[1]
+    boxes = scene.env.joint_part_boxes(joint) + fr.axis * (open_q - fr.qpos)
+    return np.array([boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0)])
+
+
+def sweep_spares(scene: Scene, obj: str, joint: str, grasp) -> bool:
+    """Opening the drawer of slide `joint` leaves `obj` alone and graspable by `grasp`: its
+    floor passes over the object's top clear, and the opened drawer is either a hand's
+    height over the grasp or clear of where the palm and the object are (see `grasp_blockers`
+    for the palm). `under_sweep` pads the object by a hand's reach; a bowl beside a cabinet
+    whose open drawer ended 3 cm before it, 10 cm over its rim, was set aside (~160 steps)."""
+    sweep = drawer_sweep(scene, joint)
+    b = scene.box(obj)
+    if sweep is None or sweep[0, 2] < b.hi[2] + FLOOR_CLEAR_M:
+        return False
+    opened = drawer_opened(scene, joint)
+    if opened[0, 2] > grasp.pos[2] + HAND_HEIGHT_M:
+        return True
+    ax = closing_axis(grasp.yaw)
+    side = np.array([-ax[1], ax[0], 0.0])
+    palm = [grasp.pos + sg * ax * r + t * side * PALM_HALF_M
+            for sg in (-1, 1) for r in (0.0, 0.05, 0.1) for t in (-1, 1)]
+    in_palm = any(np.all(opened[0, :2] - 0.005 <= p[:2]) and np.all(p[:2] <= opened[1, :2] + 0.005) for p in palm)
+    return not in_palm and not _overlap(np.array([b.lo, b.hi]), opened, pad=0.02)
 
 
 def under_sweep(scene: Scene, obj: str, sweep: np.ndarray, margin: float = 0.05) -> bool:

@@ -4,10 +4,14 @@ replan from the live scene after every skill.
 Each round reads the scene and decides one thing:
 1. a goal object fell off the table or is out of reach -> give up with that reason;
 2. the hand holds an object the next subgoal does not use -> put it aside;
-3. the arm touches something or sits low / awkward -> back it out;
+3. a wrist joint is pinned at its limit -> unwind the arm to its home joints;
+   the arm touches something or sits low / awkward -> back it out (and read the scene
+   again when that moved a part: a drawer pushed half shut);
 4. the next unmet subgoal (goal order: open, knobs, pick-and-place, close; an implied open
    before putting into a closed drawer) has something in its way -> move that aside; an
    open drawer overhangs the object to move -> push it in, set the object aside, pull it out;
+   a goal object the drawer to open would overhang goes aside first (unless the drawer
+   passes over it clear, `checks.sweep_spares`);
 5. otherwise one attempt at the subgoal; attempt k of the same subgoal grasps differently.
 A subgoal that failed MAX_TRIES times, or a budget of steps spent, ends with a reason.
 The decisions are a rule table (`rules.RULES`: precondition -> remedy, in order); this
@@ -58,6 +62,7 @@ def recover(ctx: Ctx, now: Callable[[], int], budget: int | None) -> Plan:
     tries: Counter = Counter()
     aside: Counter = Counter()
     shut: Counter = Counter()  # drawers closed because they overhung a goal object
+    unwound: Counter = Counter()
     keep = {n for c in goal for n in c[1:]}  # never moved aside: goal objects, targets and
     keep |= {s.env.region(n).parent for n in list(keep) if s.env.is_region(n)}  # their owners
     while not s.env.goal_satisfied():
@@ -66,11 +71,11 @@ def recover(ctx: Ctx, now: Callable[[], int], budget: int | None) -> Plan:
         sub = next_subgoal(ctx, steps, goal)
         if sub is None:
             raise GiveUp(GiveUpReason.NO_PLAN, "every subgoal holds but the goal does not")
-        r = Round(ctx, goal, sub, keep, tries, aside, shut)
+        r = Round(ctx, goal, sub, keep, tries, aside, shut, unwound)
         for rule in RULES:
             how = rule.when(r)
             if how is None:
                 continue
             yield from rule.then(r, how)
-            if rule.replan:
+            if rule.replan or r.stale:
                 break

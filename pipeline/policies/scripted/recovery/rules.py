@@ -31,12 +31,16 @@ from pipeline.policies.scripted.recovery.pick_place import pick_place_once
 from pipeline.policies.scripted.recovery.put_aside import put_aside
 from pipeline.policies.scripted.recovery.reasons import GiveUp, GiveUpReason
 from pipeline.policies.scripted.recovery.under_drawer import clear_from_under
+from pipeline.policies.scripted.recovery.unwind import unwind
 from pipeline.policies.scripted.recovery.variation import RetryNoise
 from pipeline.policies.scripted.stack import carried
+from pipeline.sim.facts import JointKind
 
 OPEN_FULL = 0.85  # a drawer this far open (of its range) lets a hand reach all of its inside
 MAX_TRIES = 4  # attempts per subgoal (each one different)
 MAX_ASIDE = 2  # times one obstruction is moved aside
+PART_MOVED = 0.01  # metres (or radians) a part may move while the arm backs out, the round still fresh
+MAX_UNWIND = 2  # times the arm is unwound to its home joints in one episode
 FLAT_M = 0.04  # objects lower than this are grasped with the palm near the table
 
 
@@ -56,8 +60,10 @@ class Round:
     tries: Counter  # attempts per subgoal
     aside: Counter  # times each object was moved aside
     shut: Counter  # drawers closed because they overhung a goal object
+    unwound: Counter  # times the pinned wrist was unwound (key: "wrist")
     movers: list[str] = field(init=False)  # goal objects still to be moved
     held: str | None = field(init=False)
+    stale: bool = field(init=False, default=False)  # a remedy changed what the round read: end it
 
     def __post_init__(self) -> None:
         s = self.ctx.scene
@@ -101,6 +107,16 @@ def put_held_aside(r: Round, _: bool) -> Plan:
     yield from put_aside(r.ctx, r.held, r.aside[r.held] - 1)
 
 
+def wrist_pinned(r: Round) -> bool | None:
+    return True if checks.wrist_pinned(r.ctx.scene) and r.unwound["wrist"] < MAX_UNWIND else None
+
+
+def unwind_arm(r: Round, _: bool) -> Plan:
+    r.unwound["wrist"] += 1
+    debug("unwind the wrist", r.ctx.scene.env.arm_joints()[0].round(2))
+    yield from unwind(r.ctx)
+
+
 def closed_on_nothing(r: Round) -> bool | None:
     return True if r.held is None and not r.ctx.scene.gripper_open() else None
 
@@ -132,9 +148,26 @@ def always(r: Round) -> bool:
     return True
 
 
+def part_positions(env) -> dict[str, float]:
+    """Every drawer's, door's and knob's joint position."""
+    return {j: env.joint_position(j) for f in env.fixture_names for j in env.fixture_joints(f)
+            if env.joint_frame(j).kind in (JointKind.SLIDE, JointKind.HINGE)}
+
+
 def arm_back(r: Round, _: bool) -> Plan:
-    """Back the arm out when it touches something, sits low or awkwardly (back_out looks)."""
+    """Back the arm out when it touches something, sits low or awkwardly (back_out looks).
+    A back-out that moved a part (the arm pulled in across a cabinet pushes its open drawer
+    half shut) makes the round stale: its subgoal was read with the part where it was
+    (measured: the bowl then went into a drawer no longer open, fell off its front, and the
+    episode ran out setting it aside from under the drawer)."""
+    env = r.ctx.scene.env
+    before = part_positions(env)
     yield from back_out(r.ctx)
+    after = part_positions(env)
+    moved = [j for j in before if abs(after[j] - before[j]) > PART_MOVED]
+    if moved:
+        debug("the back-out moved", moved, "- replan")
+        r.stale = True
 
 
 def in_the_way(r: Round) -> str | None:
@@ -177,7 +210,8 @@ def under_the_opening_drawer(r: Round) -> tuple[str, np.ndarray] | None:
             and articulated.is_closed_enough(s.env, sub[1])):  # (an open one only goes a little further)
         return None
     sweep = checks.drawer_sweep(s, joint)
-    under = [m for m in r.movers if sweep is not None and checks.under_sweep(s, m, sweep) and r.aside[m] < MAX_ASIDE]
+    under = [m for m in r.movers if sweep is not None and checks.under_sweep(s, m, sweep) and r.aside[m] < MAX_ASIDE
+             and not checks.sweep_spares(s, m, joint, plan_grasp(s, m))]  # (its first grasp)
     if under:
         debug("aside before opening", under)
     return (under[0], sweep) if under else None
@@ -245,6 +279,7 @@ def attempt(r: Round, _: bool) -> Plan:
 RULES: tuple[Rule, ...] = (
     Rule("goal object off the table or out of reach", hopeless, give_up),
     Rule("the hand holds an object the subgoal does not use", holds_another, put_held_aside),
+    Rule("a wrist joint is pinned at its limit", wrist_pinned, unwind_arm, replan=False),
     Rule("the hand closed on nothing", closed_on_nothing, open_hand, replan=False),
     Rule("an open drawer overhangs the object to go into it", overhanging_drawer, back_out_then_clear_from_under),
     Rule("the arm touches something, sits low or awkwardly", always, arm_back, replan=False),
