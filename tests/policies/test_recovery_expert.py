@@ -315,3 +315,23 @@ def test_a_drawer_low_over_the_table_is_hooked_open_from_above():
     finally:
         env.close()
     assert out.success and out.steps < 250, out
+
+
+@pytest.mark.sim
+def test_a_tuning_runs_low_drawer_left_shut_is_hooked_open(tmp_path):
+    """A tuning run's scene (libero_90 KITCHEN_SCENE1, init state 4, default noise, step 247,
+    made again by stage 1's own code): the generator's tilted grip left the bottom drawer
+    shut, and the recovery expert, trying the same grip, timed out."""
+    from pipeline.release.experts import attempt, recovery_expert
+    from pipeline.sim import get_task
+    from tests.stage1.default_episode import default_episode
+
+    suite, task, step = "libero_90", "KITCHEN_SCENE1_open_the_bottom_drawer_of_the_cabinet", 247
+    env = build_env(get_task(suite, task))
+    try:
+        folder = default_episode(env, tmp_path, suite, task, 4, 1175888538, horizon=step)
+        scene = np.load(folder / "states.npy")[step]
+        out = attempt(env, scene, recovery_expert(env, 0, 0.0), 0, 520, 8)
+    finally:
+        env.close()
+    assert out.success and out.steps < 260, out

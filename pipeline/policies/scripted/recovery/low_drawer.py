@@ -67,7 +67,7 @@ def hook_low_drawer(ctx: Ctx, joint: str) -> Plan:
     yield ctx.move(over, gripper=1.0, speed=0.4, yaw=yaw, approach=point, tol=0.006, max_steps=40, label="over_bar")
     # aim under the bar's top (the fingertips rest on its back edge otherwise) and keep
     # pressing down while pulling: a level pull lets the tips ride up over the bar
-    yield ctx.move(site - [0, 0, HOOK_DEPTH_M], gripper=1.0, speed=0.4, yaw=yaw, approach=point, tol=0.006, max_steps=30, label="into_slot")
+    yield ctx.move(site - [0, 0, HOOK_DEPTH_M], gripper=1.0, speed=0.4, yaw=yaw, approach=point, tol=0.006, max_steps=15, label="into_slot")
     u = sign * fr.qpos
     full = float(np.max(np.abs(fr.range)))
     target = s.eef() + pull * (full - u + 0.01) - [0, 0, HOOK_DEPTH_M]
