@@ -61,17 +61,21 @@ def hook_low_drawer(ctx: Ctx, joint: str) -> Plan:
     hover = site + pull * 0.06 + [0, 0, 0.07]
     yield from travel(ctx, hover + [0, 0, 0.08], yaw, 1.0, s.path_clearance(s.eef(), hover, 0.06, set()) + 0.07)
     ctx.approach_hold = point
-    yield ctx.move(hover + [0, 0, 0.08], gripper=1.0, yaw=yaw, approach=point, tol=0.01, rot_tol=0.15, max_steps=40, label="pitch")
+    yield ctx.move(hover + [0, 0, 0.08], gripper=1.0, yaw=yaw, approach=point, tol=0.01, rot_tol=0.15, max_steps=40,
+                   label="pitch")
     yield ctx.move(hover, gripper=1.0, speed=0.6, yaw=yaw, approach=point, tol=0.008, max_steps=40, label="lower")
     over = site + [0, 0, box[1, 2] - pos[2] + 0.02]
     yield ctx.move(over, gripper=1.0, speed=0.4, yaw=yaw, approach=point, tol=0.006, max_steps=40, label="over_bar")
     # aim under the bar's top (the fingertips rest on its back edge otherwise) and keep
     # pressing down while pulling: a level pull lets the tips ride up over the bar
-    yield ctx.move(site - [0, 0, HOOK_DEPTH_M], gripper=1.0, speed=0.4, yaw=yaw, approach=point, tol=0.006, max_steps=15, label="into_slot")
-    u = sign * fr.qpos
+    # (so the move never meets its tolerance: it ends on max_steps)
+    yield ctx.move(site - [0, 0, HOOK_DEPTH_M], gripper=1.0, speed=0.4, yaw=yaw, approach=point, tol=0.006,
+                   max_steps=15, label="into_slot")
+    u = sign * env.joint_frame(joint).qpos  # how open it is now
     full = float(np.max(np.abs(fr.range)))
     target = s.eef() + pull * (full - u + 0.01) - [0, 0, HOOK_DEPTH_M]
     yield ctx.move(target, gripper=1.0, speed=0.5, yaw=yaw, approach=point, tol=0.01, max_steps=60, label="pull")
-    yield ctx.move(s.eef() + [0, 0, 0.08], gripper=1.0, yaw=yaw, approach=point, tol=0.02, max_steps=30, label="lift_out")
+    yield ctx.move(s.eef() + [0, 0, 0.08], gripper=1.0, yaw=yaw, approach=point, tol=0.02, max_steps=30,
+                   label="lift_out")
     ctx.approach_hold = None
     ctx.yaw_hold = 0.0
