@@ -32,7 +32,8 @@ for layer, names in enumerate([
     ["scripted.recovery.reasons", "scripted.recovery.variation", "scripted.recovery.checks",
      "scripted.recovery.back_out", "scripted.recovery.unwind", "scripted.recovery.long_grasp",
      "scripted.recovery.nudge", "scripted.recovery.lying_cup",
-     "scripted.recovery.stand_book", "scripted.recovery.operate", "scripted.recovery.put_aside",
+     "scripted.recovery.stand_book", "scripted.recovery.low_drawer", "scripted.recovery.operate",
+     "scripted.recovery.put_aside",
      "scripted.recovery.under_drawer", "scripted.recovery.pick_place", "scripted.recovery.rules",
      "scripted.recovery.planner", "scripted.recovery.expert", "scripted.recovery"],
     # the other failure generators (and LeRobot's training beside its policy) and the factory

@@ -301,6 +301,22 @@ def test_a_frying_pan_is_set_down_with_its_origin_on_the_cook_region(tmp_path):
     assert out.success, (out, pan)
 
 
+@pytest.mark.sim
+def test_a_drawer_low_over_the_table_is_hooked_open_from_above():
+    """libero_90 KITCHEN_SCENE1's bottom drawer (init state 0, zero noise): its handle bar
+    is 4.6 cm over the table, too low for the tilted grip (the hand's housing meets the
+    table), and the recovery expert timed out; a pitched fist hooks the bar from behind."""
+    from pipeline.release.experts import attempt, recovery_expert
+
+    task = tasks(["libero_90"])[6]  # open the bottom drawer of the cabinet
+    env = build_env(task)
+    try:
+        out = attempt(env, task.init_states()[0], recovery_expert(env, 0, 0.0), 0, 520, 8)
+    finally:
+        env.close()
+    assert out.success and out.steps < 250, out
+
+
 def tune26_attempt(tmp_path, suite: str, task: str, seed: int, step: int, horizon: int = 520):
     """Remake a tuning run's (tune26: init state 4, default noise) failure scene at `step` by
     stage 1's own code and run the zero-noise recovery expert from it with `horizon`
@@ -382,3 +398,12 @@ def test_a_drawer_pushed_shut_by_the_back_out_is_opened_again_without_setting_th
     out = tune26_attempt(tmp_path, "libero_90", "KITCHEN_SCENE5_put_the_black_bowl_in_the_top_drawer_of_the_cabinet",
                          993743582, 116, horizon=420)
     assert out.success, out
+
+
+@pytest.mark.sim
+def test_a_tuning_runs_low_drawer_left_shut_is_hooked_open(tmp_path):
+    """A tuning run's scene (libero_90 KITCHEN_SCENE1, init state 4, default noise, step 247,
+    made again by stage 1's own code): the generator's tilted grip left the bottom drawer
+    shut, and the recovery expert, trying the same grip, timed out."""
+    out = tune26_attempt(tmp_path, "libero_90", "KITCHEN_SCENE1_open_the_bottom_drawer_of_the_cabinet", 1175888538, 247)
+    assert out.success and out.steps < 260, out

@@ -7,6 +7,7 @@ from __future__ import annotations
 from pipeline.policies.scripted import articulated, drawer_room, knobs
 from pipeline.policies.scripted.goal import Predicate
 from pipeline.policies.scripted.motion import Ctx, Plan
+from pipeline.policies.scripted.recovery.low_drawer import hook_low_drawer, low_handle
 
 
 def operate_once(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:
@@ -15,6 +16,11 @@ def operate_once(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:
     try:
         if kind == Predicate.OPEN and drawer_room.part_way_out(ctx.scene.env, conjunct[1]):
             yield from drawer_room.finish_opening(ctx, conjunct)  # not the tilted pull again
+        elif kind == Predicate.OPEN and (joint := articulated.part_joint(ctx.scene.env, conjunct[1])) \
+                and low_handle(ctx, joint):
+            if not articulated.is_closed_enough(ctx.scene.env, conjunct[1]):
+                return
+            yield from hook_low_drawer(ctx, joint)
         elif kind == Predicate.OPEN:
             yield from articulated.open_part(ctx, conjunct)
         elif kind == Predicate.CLOSE:
