@@ -357,19 +357,27 @@ def test_a_far_bowl_is_grasped_from_a_higher_hover(tmp_path):
 
 
 @pytest.mark.sim
-def test_a_far_moka_pot_keeps_the_usual_hover():
-    """libero_10 task 8 (both moka pots on the stove), init state 2, zero noise: the second
-    pot's grasp is 0.70 m out but no rim grasp; hovered over from the far bowl's 14 cm it was
-    set down off the stove, then missed (timeout). Only a far rim grasp hovers higher."""
-    task = tasks(["libero_10"])[8]
+@pytest.mark.parametrize("suite, index, init", [
+    # the second moka pot's grasp is 0.70 m out but no rim grasp: hovered over from the far
+    # bowl's 14 cm it was set down off the stove, then missed (timeout)
+    ("libero_10", 8, 2),
+    # the bowl beside the cabinet: its rim grasp's palm box looked 1 cm into the cabinet, and
+    # the grasp chosen instead dropped it twice (timeout)
+    ("libero_90", 1, 0),
+])
+def test_zero_noise_episodes_a_grasp_change_once_broke(suite, index, init):
+    """From official init states at zero noise, as scripted_success.py measures them: only a
+    far rim grasp hovers higher, and a rim grasp's first attempt trusts the fingertip rays."""
+    task = tasks([suite])[index]
     env = build_env(task)
     try:
-        env.reset_to_init(2)
-        env.settle(10)  # as scripted_success.py measures it
+        env.reset_to_init(init)
+        env.settle(10)
         result, policy = finish(env, task, 520)
     finally:
         env.close()
-    assert result.success and result.steps <= 400, (result.steps, policy.give_up_reason)
+    assert result.success and result.steps <= 460, (result.steps, policy.give_up_reason)
+
 
 @pytest.mark.sim
 def test_an_object_lying_against_a_basket_wall_is_pushed_clear_then_grasped(tmp_path):
