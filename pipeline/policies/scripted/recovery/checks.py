@@ -146,15 +146,29 @@ def blockers(scene: Scene, obj: str, dest: np.ndarray, keep: set[str]) -> list[s
     return out
 
 
+PALM_ENDS_M = (0.05, 0.1)  # points of the palm along the closing axis, either way from the grip site
+
+
+def palm_points(grasp, reaches: tuple[float, ...] = PALM_ENDS_M, half_width: float = PALM_HALF_M) -> list[np.ndarray]:
+    """Where the palm comes down with `grasp`: `reaches` either way along the closing axis,
+    `half_width` either side across it (0: its middle line only)."""
+    ax = closing_axis(grasp.yaw)
+    side = np.array([-ax[1], ax[0], 0.0])
+    return [grasp.pos + sg * ax * r + t * side * half_width
+            for sg in (-1, 1) for r in reaches for t in ((-1, 1) if half_width > 0 else (0,))]
+
+
+def covers(lo: np.ndarray, hi: np.ndarray, points: list[np.ndarray], pad: float = 0.005) -> bool:
+    """A box (lo, hi) covers one of `points` seen from above, padded by `pad`."""
+    return any(np.all(lo[:2] - pad <= p[:2]) and np.all(p[:2] <= hi[:2] + pad) for p in points)
+
+
 def grasp_blockers(scene: Scene, obj: str, grasp, keep: set[str], half_width: float = PALM_HALF_M) -> list[str]:
     """Movable objects standing where the palm's ends go down when grasping `obj` with
     `grasp` (the palm reaches ~10 cm either way along the closing axis, ~5 cm above the
     grip site; `half_width` across it, 0: its middle line only): the best grasp of a flat
     box next to a tall carton is such a case."""
-    ax = closing_axis(grasp.yaw)
-    side = np.array([-ax[1], ax[0], 0.0])
-    points = [grasp.pos + sg * ax * r + t * side * half_width
-              for sg in (-1, 1) for r in (0.05, 0.1) for t in ((-1, 1) if half_width > 0 else (0,))]
+    points = palm_points(grasp, half_width=half_width)
     out = []
     for o in scene.env.object_names:
         if o == obj or o in keep:
@@ -162,7 +176,7 @@ def grasp_blockers(scene: Scene, obj: str, grasp, keep: set[str], half_width: fl
         b = scene.box(o)
         if b.hi[2] < grasp.pos[2] + 0.05:
             continue
-        if any(np.all(b.lo[:2] - 0.005 <= p[:2]) and np.all(p[:2] <= b.hi[:2] + 0.005) for p in points):
+        if covers(b.lo, b.hi, points):
             out.append(o)
     return out
 
@@ -207,15 +221,29 @@ def clear_grasp_choice(scene: Scene, obj: str, dest: np.ndarray | None, start: i
 def drawer_sweep(scene: Scene, joint: str) -> np.ndarray | None:
     """(2, 3) box the drawer of a slide `joint` covers from now until fully open, or None
     for a hinge."""
-    fr = scene.env.joint_frame(joint)
-    if fr.kind != JointKind.SLIDE:
+    if scene.env.joint_frame(joint).kind != JointKind.SLIDE:
         return None
-    rng = fr.range
-    open_q = rng[0] if abs(rng[0]) > abs(rng[1]) else rng[1]
-    shift = fr.axis * (open_q - fr.qpos)
+    now = _drawer_box(scene, joint)
+    opened = now + _to_open(scene, joint)
+    return np.array([np.minimum(now[0], opened[0]), np.maximum(now[1], opened[1])])
+
+
+def drawer_opened(scene: Scene, joint: str) -> np.ndarray:
+    """(2, 3) box of the drawer of a slide `joint` pulled fully out."""
+    return _drawer_box(scene, joint) + _to_open(scene, joint)
+
+
+def _drawer_box(scene: Scene, joint: str) -> np.ndarray:
+    """(2, 3) box of the drawer of slide `joint` where it is now."""
     boxes = scene.env.joint_part_boxes(joint)
-    lo, hi = boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0)
-    return np.array([np.minimum(lo, lo + shift), np.maximum(hi, hi + shift)])
+    return np.array([boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0)])
+
+
+def _to_open(scene: Scene, joint: str) -> np.ndarray:
+    """(3,) shift of slide `joint`'s drawer from where it is to fully out."""
+    fr = scene.env.joint_frame(joint)
+    open_q = fr.range[0] if abs(fr.range[0]) > abs(fr.range[1]) else fr.range[1]
+    return fr.axis * (open_q - fr.qpos)
 
 
 OPEN_MIN_M = 0.02  # a drawer out less than this overhangs nothing in front of the cabinet
@@ -267,14 +295,6 @@ FLOOR_CLEAR_M = 0.02  # a drawer's floor this far over an object's top passes ov
 HAND_HEIGHT_M = 0.15  # grip site to the top of the hand coming down on a grasp
 
 
-def drawer_opened(scene: Scene, joint: str) -> np.ndarray:
-    """(2, 3) box of the drawer of a slide `joint` pulled fully out."""
-    fr = scene.env.joint_frame(joint)
-    open_q = fr.range[0] if abs(fr.range[0]) > abs(fr.range[1]) else fr.range[1]
-    boxes = scene.env.joint_part_boxes(joint) + fr.axis * (open_q - fr.qpos)
-    return np.array([boxes[:, 0].min(axis=0), boxes[:, 1].max(axis=0)])
-
-
 def sweep_spares(scene: Scene, obj: str, joint: str, grasp) -> bool:
     """Opening the drawer of slide `joint` leaves `obj` alone and graspable by `grasp`: its
     floor passes over the object's top clear, and the opened drawer is either a hand's
@@ -288,11 +308,7 @@ def sweep_spares(scene: Scene, obj: str, joint: str, grasp) -> bool:
     opened = drawer_opened(scene, joint)
     if opened[0, 2] > grasp.pos[2] + HAND_HEIGHT_M:
         return True
-    ax = closing_axis(grasp.yaw)
-    side = np.array([-ax[1], ax[0], 0.0])
-    palm = [grasp.pos + sg * ax * r + t * side * PALM_HALF_M
-            for sg in (-1, 1) for r in (0.0, 0.05, 0.1) for t in (-1, 1)]
-    in_palm = any(np.all(opened[0, :2] - 0.005 <= p[:2]) and np.all(p[:2] <= opened[1, :2] + 0.005) for p in palm)
+    in_palm = covers(opened[0], opened[1], palm_points(grasp, (0.0, *PALM_ENDS_M)))
     return not in_palm and not _overlap(np.array([b.lo, b.hi]), opened, pad=0.02)
 
 

@@ -114,7 +114,8 @@ def _depths(pos: np.ndarray, yaw: float, part, solids: Solids, along_off: float 
         n = np.linalg.norm(t, axis=1)
         ok = n > 1e-6
         t = t / np.maximum(n, 1e-6)[:, None]
-        reach = np.abs(t @ hand_axes.T) @ hand_half + np.sum(np.abs(np.einsum("nij,nj->ni", solids.axes, t)) * solids.halves, axis=1)
+        solid_reach = np.sum(np.abs(np.einsum("nij,nj->ni", solids.axes, t)) * solids.halves, axis=1)
+        reach = np.abs(t @ hand_axes.T) @ hand_half + solid_reach
         gap = reach - np.abs(np.sum(d * t, axis=1))
         depth = np.where(ok, np.minimum(depth, gap), depth)
     return depth
