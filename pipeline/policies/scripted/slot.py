@@ -51,9 +51,11 @@ def has_roof(env, target: str, obj: str) -> bool:
     return env.ray_down(centre[:2], centre[2] + 0.6, centre[2], ignore=obj) is not None
 
 
-def slot_alignment(ctx: Ctx, obj: str, target: str) -> float | None:
+def slot_alignment(ctx: Ctx, obj: str, target: str, size: tuple[float, float] | None = None) -> float | None:
     """World angle the slab's long axis must take to fit `target`, or None when this skill
-    does not apply (see the module docstring)."""
+    does not apply (see the module docstring). `size`: the slab's own (length, thickness)
+    to fit instead of its footprint (a book hanging a few degrees off upright: the recovery
+    expert's `stand_book`)."""
     s = ctx.scene
     env = s.env
     if not env.is_region(target) or env.region(target).joints or not is_upright_slab(s, obj):
@@ -62,6 +64,8 @@ def slot_alignment(ctx: Ctx, obj: str, target: str) -> float | None:
         return None
     _, half = region_box(env, target)
     theta, length, thin, _ = footprint(env.object_corners(obj))
+    if size is not None:
+        length, thin = size
     options = []
     for angle, (along, across) in ((0.0, (half[0], half[1])), (np.pi / 2, (half[1], half[0]))):
         if length / 2 + FIT_MARGIN <= along and thin / 2 + FIT_MARGIN <= across:

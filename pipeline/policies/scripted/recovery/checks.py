@@ -31,6 +31,12 @@ SAFE_Z = 0.16  # grip site above the table top from which any approach may start
 HOME_XY = np.array([0.45, 0.0])
 COMFORT_XY = np.array([[0.15, -0.45], [0.95, 0.45]])
 LIFT_COST = 1.0  # metres of travel one metre of lift over obstacles is worth, choosing a free spot
+# where free_spot looks, from the robot's base: (x, y) grids tried in order. First in front of
+# the robot (far or close spots are slow); where that is full (KITCHEN_SCENE4: the bottom
+# drawer's sweep and the counter's clutter left no spot, the bowl held aside -> `no_plan`),
+# a wider ring the arm still reaches
+SPOT_GRIDS = ((np.arange(0.42, 0.7, 0.03), np.arange(-0.3, 0.301, 0.03)),
+              (np.arange(0.33, 0.76, 0.03), np.arange(-0.45, 0.451, 0.03)))
 
 
 def moved_objects(scene: Scene) -> list[str]:
@@ -331,19 +337,22 @@ def free_spot(scene: Scene, obj: str, avoid: list[np.ndarray], forbid: list[np.n
     base = robot_base(scene)[:2]
     eef = scene.eef()[:2]
     boxes = [b for _, b in scene.obstacle_boxes({obj}) if b[1, 2] > table + 0.005]
-    best = None
     home = base + HOME_XY
-    for x in np.arange(0.42, 0.7, 0.03):  # in front of the robot: far or close spots are slow
-        for y in np.arange(-0.3, 0.301, 0.03):
-            xy = base + [x, y]
-            sq = np.array([[*(xy - r), 0.0], [*(xy + r), 0.0]])
-            if any(_overlap(b, sq) for b in boxes) or any(_overlap(f, sq, pad=0.05) for f in forbid):
-                continue
-            cost = float(np.linalg.norm(xy - eef)) + float(np.linalg.norm(xy - home))
-            if corridor_m > 0:
-                over = sweep_clearance(scene, box.centre, xy, corridor_m, {obj}) - table
-                cost += LIFT_COST * over
-            cost += sum(max(0.0, 0.2 - float(np.linalg.norm(xy - a[:2]))) * 5 for a in avoid)
-            if best is None or cost < best[0]:
-                best = (cost, xy)
-    return None if best is None else best[1]
+    for xs, ys in SPOT_GRIDS:
+        best = None
+        for x in xs:
+            for y in ys:
+                xy = base + [x, y]
+                sq = np.array([[*(xy - r), 0.0], [*(xy + r), 0.0]])
+                if any(_overlap(b, sq) for b in boxes) or any(_overlap(f, sq, pad=0.05) for f in forbid):
+                    continue
+                cost = float(np.linalg.norm(xy - eef)) + float(np.linalg.norm(xy - home))
+                if corridor_m > 0:
+                    over = sweep_clearance(scene, box.centre, xy, corridor_m, {obj}) - table
+                    cost += LIFT_COST * over
+                cost += sum(max(0.0, 0.2 - float(np.linalg.norm(xy - a[:2]))) * 5 for a in avoid)
+                if best is None or cost < best[0]:
+                    best = (cost, xy)
+        if best is not None:
+            return best[1]
+    return None

@@ -21,8 +21,9 @@ from pipeline.policies.scripted.recovery import checks
 from pipeline.policies.scripted.recovery.long_grasp import lying_long, slide_clear
 from pipeline.policies.scripted.recovery.nudge import palm_clear, push, push_plan
 from pipeline.policies.scripted.recovery.lying_cup import grasp_by_handle, lying_handle_grasp, place_by_handle
-from pipeline.policies.scripted.recovery.stand_book import quarter_turn, stand_tilt, stand_up, too_steep
+from pipeline.policies.scripted.recovery.stand_book import quarter_turn, slot_size, stand_tilt, stand_up, too_steep
 from pipeline.policies.scripted.skills import place
+from pipeline.policies.scripted.slot import place_in_slot, slot_alignment
 from pipeline.policies.scripted.stack import carried
 from pipeline.policies.scripted.strategies import PLACEMENTS
 
@@ -68,11 +69,25 @@ def tilted_spot(ctx: Ctx, obj: str, target: str) -> np.ndarray | None:
     return region.pos[:2] + normal[:2] * (s.box(obj).size[2] / 2 + TILT_MARGIN_M)
 
 
+def book_slot(ctx: Ctx, obj: str, target: str) -> float | None:
+    """The slot skill's alignment for a book this attempt stood up in the hand, judged by
+    the book's own size (`stand_book.slot_size`); None where a placement strategy before
+    the slot skill takes it (a shelf) or it does not fit."""
+    for p in PLACEMENTS:
+        if p.plan is place_in_slot:
+            break
+        if p.applies(ctx, obj, target) is not None:
+            return None
+    size = slot_size(ctx.scene, obj)
+    return None if size is None else slot_alignment(ctx, obj, target, size=size)
+
+
 def pick_place_once(ctx: Ctx, conjunct: tuple[str, ...], attempt: int) -> Plan:
     _, obj, target = conjunct
     s = ctx.scene
     ctx.begin("pick_place", conjunct, obj, target)
     by_handle = False
+    book = None  # a book this attempt stands up in the hand
     if not carried(s, obj, checks.held(s)):
         book = stand_tilt(s, obj)
         if book is not None and too_steep(book):
@@ -118,6 +133,8 @@ def pick_place_once(ctx: Ctx, conjunct: tuple[str, ...], attempt: int) -> Plan:
             yield from place(ctx, obj, target, shift=box_centre_offset(s, obj))
         else:
             yield from place_at(ctx, obj, spot - box_centre_offset(s, obj), support_ceiling(s.env, target))
+    elif book is not None and (angle := book_slot(ctx, obj, target)) is not None:
+        yield from place_in_slot(ctx, obj, target, angle)
     else:
         yield from place(ctx, obj, target, stand=True)
     if ctx.truth is not None:

@@ -36,11 +36,22 @@ from pipeline.policies.scripted.scene import Scene
 
 UPRIGHT_DEG = 20.0  # up axis within this of vertical: standing, grasped from above as usual
 MAX_TILT = np.radians(75.0)  # most the hand is tilted from pointing down (further: out of reach)
-FACE_UP = 0.6  # faces' normal more vertical than this (sine of its elevation): lying on its face
+# faces' normal more vertical than this (sine of its elevation): lying on its face. A book
+# lying across a compartment or against a mug with its faces 30-45 deg from level (normal
+# 0.74-0.86) leans: it was taken for lying flat and got top-down grasps, which slid off its
+# faces four times (measured: tune26, STUDY_SCENE2's front and STUDY_SCENE3's right compartments)
+FACE_UP = 0.9
 BOTTOM_FRAC = 0.1  # the origin lies within this fraction of the height from one end: a book
 BACK_OFF_M = 0.09  # grip site this far up the book's axis from the grasp before going in
 LIFT_M = 0.12  # lift after closing, before the hand turns
 SETTLE_STEPS = 10  # the book swings on in the fingers this long after the hand stopped turning
+# ... and may swing on after it (measured: 0.4 -> 5.1 -> 0.1 deg over 13 steps), then hang a
+# few degrees off upright (steady at 3.6 deg). The slot skill measures the footprint it fits:
+# mid-swing it varies from step to step, so wait until the swing stops (under SWING_DEG in
+# SWING_STEPS, at most SWING_MAX_STEPS), and see `slot_size` for the steady tilt
+SWING_DEG = 0.3
+SWING_STEPS = 4
+SWING_MAX_STEPS = 40
 TILT_STEPS = 60
 REACH_TOL = 0.1  # radians off the tilted orientation after TILT_STEPS: out of reach
 STEEP = np.radians(65.0)  # hand tilts beyond this are made TURN_ABOVE_M above the start point
@@ -124,6 +135,33 @@ def stand_up(ctx: Ctx, obj: str, ax: BookAxes) -> Plan:
     # the book swings on in the fingers for a few steps after the hand stopped turning; the
     # slot skill measures its footprint next
     yield Grip(1.0, SETTLE_STEPS, label="settle")
+    was = _off_upright(ctx.scene, obj)
+    for _ in range(SWING_MAX_STEPS // SWING_STEPS):
+        yield Grip(1.0, SWING_STEPS, label="settle")
+        now = _off_upright(ctx.scene, obj)
+        if abs(now - was) < np.radians(SWING_DEG):
+            break
+        was = now
+
+
+def slot_size(s: Scene, obj: str) -> tuple[float, float] | None:
+    """(length, thickness) of a book held upright, for the slot skill to fit instead of its
+    footprint. It hangs a few degrees off upright in the fingers (pivoting there: steady
+    at 3.6 deg), which widens the footprint of an 11.3 cm book past the 11.6 cm the slot
+    skill fits into a 12.4 cm compartment; put in anyway, it straightens as its bottom meets
+    the floor (measured: STUDY_SCENE2 and STUDY_SCENE3's right compartments, three scenes
+    that placed it beside the slot and jammed it on a wall, certified)."""
+    ax = book_axes(s, obj)
+    if ax is None:
+        return None
+    corners = s.env.object_corners(obj)
+    return float(np.linalg.norm(ax.ends[1] - ax.ends[0])), float(np.ptp(corners @ ax.thin))
+
+
+def _off_upright(s: Scene, obj: str) -> float:
+    """Radians between the book's up axis and vertical (0 when it is not book-shaped)."""
+    ax = book_axes(s, obj)
+    return 0.0 if ax is None else _tilt(ax.up)
 
 
 def quarter_turn(ctx: Ctx, obj: str, ax: BookAxes) -> Plan:
