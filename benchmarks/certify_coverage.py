@@ -12,6 +12,10 @@ benchmarks/results/ (`--out` stem).
 
     .venv/bin/python benchmarks/certify_coverage.py runs/default [--tries 2] [--horizon 520] \\
         [--workers 2] [--out benchmarks/results/certify_coverage]
+
+`--stage2` certifies the scenes stage 2 chose instead (`stage2/localizations.parquet`, no
+review or release needed: a tuning run's scenes), with the level and category stage 3 gave
+each (`unknown` before stage 3).
 """
 
 from __future__ import annotations
@@ -139,6 +143,38 @@ def release_folder(arg: Path) -> Path:
     raise SystemExit(f"{arg}: no scenarios.parquet here or in {arg / 'release'} (run `recover release` first)")
 
 
+def stage2_scenes(run: Path) -> tuple[Path, list[dict]]:
+    """(root the paths are under, scene rows) of the scenes stage 2 chose in `run`."""
+    import pyarrow.parquet as pq
+
+    root = run / "stage2"
+    table = root / "localizations.parquet"
+    if not table.is_file():
+        raise SystemExit(f"{table}: not found (run stage 2 first)")
+    rows = []
+    for r in pq.read_table(table).to_pylist():
+        if not r["scene_state"]:
+            continue  # quarantined or no failure found: no scene
+        label = run / "stage3" / "characterizations" / f"{r['key']}.json"
+        char = json.loads(label.read_text()) if label.is_file() else {}
+        rows.append({"scene": f"{r['key']}/step_{r['scene_step']:04d}", "suite": r["suite"], "task": r["task"],
+                     "instruction": r["instruction"], "level": char.get("recovery_level", "unknown"),
+                     "category": char.get("failure_category", "unknown"),
+                     "bddl_path": r["scene_bddl"], "state_path": r["scene_state"]})
+    return root, rows
+
+
+def release_scenes(arg: Path) -> tuple[Path, list[dict]]:
+    """(release folder, scene rows) of a run's or a release folder's manifest."""
+    from pipeline.release.manifest import read_manifest
+
+    release = release_folder(arg)
+    return release, [{"scene": f"{r.suite}/{r.task}/{r.episode_id}/step_{r.step:04d}", "suite": r.suite,
+                      "task": r.task, "instruction": r.instruction, "level": r.level, "category": r.category,
+                      "bddl_path": r.bddl_path, "state_path": r.state_path}
+                     for r in read_manifest(release / "scenarios.parquet")]
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("run", type=Path, help="a run folder (with release/) or a release folder")
@@ -153,28 +189,22 @@ def main() -> None:
     ap.add_argument("--match", action="append", default=[],
                     help="only scenes whose id (suite/task/episode/step_NNNN) contains this text; repeatable")
     ap.add_argument("--experts", default=",".join(EXPERTS), help="comma-separated subset of: " + ", ".join(EXPERTS))
+    ap.add_argument("--stage2", action="store_true", help="the scenes stage 2 chose (a run without a release)")
     args = ap.parse_args()
     experts = [e for e in args.experts.split(",") if e]
     if not experts or set(experts) - set(EXPERTS):
         raise SystemExit(f"--experts {args.experts!r}: choose from {', '.join(EXPERTS)}")
 
-    from pipeline.release.manifest import read_manifest
-
-    release = release_folder(args.run)
-    rows = read_manifest(release / "scenarios.parquet")
+    release, rows = stage2_scenes(args.run) if args.stage2 else release_scenes(args.run)
     groups: dict[tuple, list[dict]] = defaultdict(list)
     for r in rows:
-        scene = f"{r.suite}/{r.task}/{r.episode_id}/step_{r.step:04d}"
-        if args.match and not any(m in scene for m in args.match):
+        if args.match and not any(m in r["scene"] for m in args.match):
             continue
-        groups[(r.suite, r.task, (release / r.bddl_path).read_bytes())].append(
-            {"scene": scene, "suite": r.suite, "task": r.task,
-             "instruction": r.instruction, "level": r.level, "category": r.category,
-             "bddl_path": r.bddl_path, "state_path": r.state_path})
+        groups[(r["suite"], r["task"], (release / r["bddl_path"]).read_bytes())].append(r)
     units = [(str(release), g, e, args.tries, args.horizon, args.chunk) for g in groups.values() for e in experts]
     n_scenes = sum(len(g) for g in groups.values())
     if not n_scenes:
-        raise SystemExit(f"{release / 'scenarios.parquet'}: no scene matches --match {args.match}")
+        raise SystemExit(f"{release}: no scene matches --match {args.match}")
     console = Console()
     results: list[dict] = []
     t0 = time.perf_counter()
@@ -194,7 +224,7 @@ def main() -> None:
         out.add_row("all" if dim == "all" else f"{dim}: {val}", str(n), *ran,
                     f"{(c['recovery'] - c['plain']) / n:+.0%}" if set(EXPERTS) <= set(experts) else "-")
     console.print(out)
-    note = (f"Release `{release}`: {n_scenes} scenes; each expert up to {args.tries} tries, horizon {args.horizon}, "
+    note = (f"{'Stage-2 scenes' if args.stage2 else 'Release'} `{release}`: {n_scenes} scenes; each expert up to {args.tries} tries, horizon {args.horizon}, "
             f"chunk {args.chunk}; {len(results)} certificates in {wall / 60:.1f} min on {args.workers} workers.")
     md = markdown(table, reasons, note, tuple(experts))
     console.print(f"recovery expert, not certified by reason: {dict(reasons.most_common())}")

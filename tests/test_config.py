@@ -134,13 +134,28 @@ def test_config_remembers_its_file_for_later_errors(tmp_path):
     assert isinstance(err, ConfigError) and str(p) in str(err) and "tasks.tasks" in str(err)
 
 
-def test_the_report_config_is_the_default_on_init_states_nobody_tunes_on():
-    """`extends`: the report run states only what differs (README, "Tuning protocol")."""
-    default, report = load_config(ROOT / "configs/default.yaml"), load_config(ROOT / "configs/report.yaml")
-    assert report.tasks.init_states == [42, 43] and not set(report.tasks.init_states) & set(range(5))
+@pytest.mark.parametrize("name, inits", [("report", [42, 43]), ("report2", [44, 45])])
+def test_the_report_configs_are_the_default_on_init_states_nobody_tunes_on(name, inits):
+    """`extends`: a report run states only what differs (README, "Tuning protocol"); each
+    round reports on init states no earlier report used."""
+    default, report = load_config(ROOT / "configs/default.yaml"), load_config(ROOT / f"configs/{name}.yaml")
+    assert report.tasks.init_states == inits and not set(report.tasks.init_states) & set(range(5))
     assert report.tasks.suites == default.tasks.suites and report.tasks.max_tasks_per_suite is None  # all 130 tasks
     assert report.stage1 == default.stage1 and report.release == default.release  # the noise is the default's
-    assert report.run.name == "report" and report.run.seed == default.run.seed
+    assert report.run.name == name and report.run.seed == default.run.seed
+    assert str(report.run.output_dir) == f"runs/{name}"
+
+
+def test_tuning_configs_stay_on_init_states_0_to_4_and_reports_never_repeat():
+    """The protocol's rule, on the configs in the repo: a tuning run never uses a report run's
+    init states, and no two report runs share one."""
+    tuning = sorted((ROOT / "configs/tuning").glob("*.yaml"))
+    assert tuning, "configs/tuning/ holds the tuning runs' configs"
+    for path in tuning:
+        assert set(load_config(path).tasks.init_states) <= set(range(5)), path.name
+    reports = [load_config(p).tasks.init_states for p in sorted((ROOT / "configs").glob("report*.yaml"))]
+    used = [i for inits in reports for i in inits]
+    assert len(reports) >= 2 and len(used) == len(set(used)) and min(used) >= 42
 
 
 def test_extends_merges_section_by_section_and_names_a_bad_base(tmp_path):

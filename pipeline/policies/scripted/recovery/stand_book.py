@@ -9,7 +9,9 @@ is tilted from vertical. Output: primitives that
 2. go down along that axis and close on the top edge (as deep as a standing book's grasp,
    `grasps.SLAB_GRIP_BELOW_TOP`);
 3. lift, and turn the hand back to pointing straight down: the book turns with it and hangs
-   upright, held near its top edge like a standing book grasped from above.
+   upright, held near its top edge like a standing book grasped from above (a few degrees
+   off, as it pivots in the fingers: it is let stop swinging, and `slot_size` gives the
+   slot skill the book's own size to fit rather than its widened footprint).
 A top-down grasp cannot hold such a book: every horizontal width of a leaning book is wider
 than the open fingers, and a rim grasp slips off its faces (measured: 4 of 4 missed).
 The hand turns at most `MAX_TILT` from pointing down (a hand pointing level, low over the
