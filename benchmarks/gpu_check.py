@@ -1,6 +1,7 @@
 """What a GPU machine changes: frame cost of the renderer, and the transformers VLM backend on CUDA.
 
-    python benchmarks/gpu_check.py render FOLDER   # a render_cost.py folder: states, fields, scene.xml + assets/
+    python benchmarks/gpu_check.py export FOLDER   # here: states, fields, scene.xml + assets/ for `render`
+    python benchmarks/gpu_check.py render FOLDER   # there: a folder from `export`
     python benchmarks/gpu_check.py vlm [--family qwen3_5]
 
 Meant for a lent GPU machine whose image has CUDA torch and transformers but no LIBERO or
@@ -81,6 +82,40 @@ def render(folder: Path, reps: int) -> dict:
     return out
 
 
+def export(folder: Path) -> dict:
+    """Write what `render` needs, on a machine with LIBERO: `render_cost.py`'s states and
+    reset fields of its episode (libero_spatial task 0), and the scene as robosuite compiles
+    it (`scene.xml`) with every file it names copied into `assets/` (the compiled MJB holds
+    the textures unpacked, 284 MB, over what a device call may carry; `tar cJf` the folder:
+    about 23 MB)."""
+    import re
+    import shutil
+    from argparse import Namespace
+
+    sys.path.insert(0, str(REPO / "benchmarks"))
+    import render_cost
+
+    from pipeline.sim import SimEnv
+    from pipeline.sim.registry import tasks
+
+    (folder / "assets").mkdir(parents=True, exist_ok=True)
+    render_cost.prepare(Namespace(suite="libero_spatial", task_index=0, horizon=160), folder)
+    (folder / "model.mjb").unlink()  # the XML below replaces it
+    with SimEnv(tasks(["libero_spatial"])[0]) as env:
+        xml = env.env.sim.model.get_xml()
+    names: dict[str, str] = {}
+    for path in sorted(set(re.findall(r'file="([^"]+)"', xml))):
+        name, k = Path(path).name, 0
+        while name in names.values():  # two meshes of one name from different folders
+            k += 1
+            name = f"{k}_{Path(path).name}"
+        names[path] = name
+        shutil.copy(path, folder / "assets" / name)
+        xml = xml.replace(f'file="{path}"', f'file="assets/{name}"')
+    (folder / "scene.xml").write_text(re.sub(r'(meshdir|texturedir)="[^"]*"', "", xml))
+    return {"folder": str(folder), "assets": len(names)}
+
+
 def vlm(family: str, device: str = "cuda") -> dict:
     import av
     import numpy as np
@@ -128,13 +163,16 @@ def vlm(family: str, device: str = "cuda") -> dict:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("what", choices=["render", "vlm"])
+    ap.add_argument("what", choices=["export", "render", "vlm"])
     ap.add_argument("folder", nargs="?", type=Path)
     ap.add_argument("--reps", type=int, default=3)
     ap.add_argument("--family", default="qwen3_5")
     ap.add_argument("--device", default="cuda")
     args = ap.parse_args()
-    out = render(args.folder, args.reps) if args.what == "render" else vlm(args.family, args.device)
+    if args.what in ("export", "render") and args.folder is None:
+        raise SystemExit(f"gpu_check.py {args.what}: give the FOLDER")
+    out = (export(args.folder) if args.what == "export" else render(args.folder, args.reps) if args.what == "render"
+           else vlm(args.family, args.device))
     print(json.dumps(out, indent=1))
 
 
