@@ -202,6 +202,13 @@ def _push_drawer(ctx: Ctx, joint: str) -> Plan:
     yield ctx.move(s.eef() + [0, 0, 0.08], gripper=1.0, yaw=yaw, tol=0.02, max_steps=30, label="retreat")
 
 
+def fist_into(pull: np.ndarray, pitch: float) -> np.ndarray:
+    """Pointing axis of a fist pitched `pitch` radians from straight down toward a drawer
+    whose opening direction is `pull` (into its face: the wrist trails behind)."""
+    push = -np.array([pull[0], pull[1], 0.0]) / np.linalg.norm(pull[:2])
+    return push * np.sin(pitch) + np.array([0.0, 0.0, -1.0]) * np.cos(pitch)
+
+
 def _push_low_drawer(ctx: Ctx, joint: str) -> Plan:
     """A drawer just over the table (the white cabinet's bottom one): a top-down fist at
     its handle brings the forearm down onto the cabinet's top edge before the drawer is
@@ -221,8 +228,7 @@ def _push_low_drawer(ctx: Ctx, joint: str) -> Plan:
     pos[2] = max(part_top - 0.012, box[1, 2] + 0.02)
     pos[k] = face + d * (FINGER_HALF + 0.01)
     yaw = np.pi / 2 if k == 1 else 0.0  # the palm's long side across the push
-    push = -np.array([pull[0], pull[1], 0.0]) / np.linalg.norm(pull[:2])
-    point = push * np.sin(PUSH_PITCH) + np.array([0.0, 0.0, -1.0]) * np.cos(PUSH_PITCH)
+    point = fist_into(pull, PUSH_PITCH)
     ctx.yaw_hold = yaw
     if s.gripper_open():
         yield Grip(1.0, ctx.close_steps, label="make_fist")

@@ -338,21 +338,19 @@ def free_spot(scene: Scene, obj: str, avoid: list[np.ndarray], forbid: list[np.n
     eef = scene.eef()[:2]
     boxes = [b for _, b in scene.obstacle_boxes({obj}) if b[1, 2] > table + 0.005]
     home = base + HOME_XY
+
+    def free(xy: np.ndarray) -> bool:
+        sq = np.array([[*(xy - r), 0.0], [*(xy + r), 0.0]])
+        return not any(_overlap(b, sq) for b in boxes) and not any(_overlap(f, sq, pad=0.05) for f in forbid)
+
+    def cost(xy: np.ndarray) -> float:
+        c = float(np.linalg.norm(xy - eef)) + float(np.linalg.norm(xy - home))
+        if corridor_m > 0:
+            c += LIFT_COST * (sweep_clearance(scene, box.centre, xy, corridor_m, {obj}) - table)
+        return c + sum(max(0.0, 0.2 - float(np.linalg.norm(xy - a[:2]))) * 5 for a in avoid)
+
     for xs, ys in SPOT_GRIDS:
-        best = None
-        for x in xs:
-            for y in ys:
-                xy = base + [x, y]
-                sq = np.array([[*(xy - r), 0.0], [*(xy + r), 0.0]])
-                if any(_overlap(b, sq) for b in boxes) or any(_overlap(f, sq, pad=0.05) for f in forbid):
-                    continue
-                cost = float(np.linalg.norm(xy - eef)) + float(np.linalg.norm(xy - home))
-                if corridor_m > 0:
-                    over = sweep_clearance(scene, box.centre, xy, corridor_m, {obj}) - table
-                    cost += LIFT_COST * over
-                cost += sum(max(0.0, 0.2 - float(np.linalg.norm(xy - a[:2]))) * 5 for a in avoid)
-                if best is None or cost < best[0]:
-                    best = (cost, xy)
-        if best is not None:
-            return best[1]
+        spots = [xy for xy in (base + [x, y] for x in xs for y in ys) if free(xy)]
+        if spots:
+            return min(spots, key=cost)  # the first of equal costs, as the grid runs
     return None

@@ -29,9 +29,9 @@ def table_top(ctx: Ctx) -> float:
 
 def low_handle(ctx: Ctx, joint: str) -> bool:
     env = ctx.scene.env
-    if env.joint_frame(joint).kind != JointKind.SLIDE:
-        return False
     fr = env.joint_frame(joint)
+    if fr.kind != JointKind.SLIDE:
+        return False
     pull = fr.axis * articulated.open_sign(fr.range)
     box, _, _ = articulated.handle_box(env, joint, pull)
     return (box[0, 2] + box[1, 2]) / 2 < table_top(ctx) + LOW_HANDLE_M
@@ -51,8 +51,7 @@ def hook_low_drawer(ctx: Ctx, joint: str) -> Plan:
     pos[k] = (face + back) / 2
     pos[2] = (box[0, 2] + box[1, 2]) / 2
     yaw = np.pi / 2 if k == 1 else 0.0  # closing axis along the bar
-    push = -np.array([pull[0], pull[1], 0.0]) / np.linalg.norm(pull[:2])
-    point = push * np.sin(HOOK_PITCH) + np.array([0.0, 0.0, -1.0]) * np.cos(HOOK_PITCH)
+    point = articulated.fist_into(pull, HOOK_PITCH)
     ctx.yaw_hold = yaw
     if s.gripper_open():
         yield Grip(1.0, ctx.close_steps, label="make_fist")
