@@ -147,21 +147,24 @@ def stage2_scenes(run: Path) -> tuple[Path, list[dict]]:
     """(root the paths are under, scene rows) of the scenes stage 2 chose in `run`."""
     import pyarrow.parquet as pq
 
-    root = run / "stage2"
-    table = root / "localizations.parquet"
+    from pipeline.layout import RunLayout
+    from pipeline.records import Characterization
+
+    layout = RunLayout(run)
+    table = layout.stage2.localizations_table
     if not table.is_file():
         raise SystemExit(f"{table}: not found (run stage 2 first)")
     rows = []
     for r in pq.read_table(table).to_pylist():
         if not r["scene_state"]:
             continue  # quarantined or no failure found: no scene
-        label = run / "stage3" / "characterizations" / f"{r['key']}.json"
-        char = json.loads(label.read_text()) if label.is_file() else {}
+        label = layout.stage3.characterization(r["key"])
+        char = Characterization.model_validate_json(label.read_text()) if label.is_file() else None
         rows.append({"scene": f"{r['key']}/step_{r['scene_step']:04d}", "suite": r["suite"], "task": r["task"],
-                     "instruction": r["instruction"], "level": char.get("recovery_level", "unknown"),
-                     "category": char.get("failure_category", "unknown"),
+                     "instruction": r["instruction"], "level": char.recovery_level.value if char else "unknown",
+                     "category": char.failure_category.value if char else "unknown",
                      "bddl_path": r["scene_bddl"], "state_path": r["scene_state"]})
-    return root, rows
+    return layout.stage2.root, rows
 
 
 def release_scenes(arg: Path) -> tuple[Path, list[dict]]:
