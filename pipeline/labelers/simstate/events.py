@@ -22,6 +22,13 @@ Rules:
   drawer with a fist is not a grasp; a close that held an object was a grasp, even if the
   hand brushed a fixture). A hold that never raised its object >= `lift_m` and ended with
   the gripper still closed (squeezed on its support, it slipped out) is no grasp either.
+  A close farther than `near_m` from every object is a grasp missed on the nearest target
+  too when that target is within `reach_m`, the close lasted >= `air_close_steps` and the
+  fingers ended shut on nothing (opening < `shut_m`): the hand shut on air short of the
+  target (a close that came early, one blocked by the rack or the cabinet above it, or on a
+  bottle's neck or a pan's handle far from the body's origin). Fingers around a drawer
+  handle stay ~1.7 cm apart, and a close of a few steps is the command flickering: neither
+  is a grasp.
   Step: the first closed step. Object: that object.
 - grasp_lost: a hold ends while the gripper is still commanded closed, after it had raised
   the object >= `lift_m`. Step: the first ungrasped step.
@@ -84,6 +91,9 @@ from pipeline.records import EventKind, SimEvent
 @dataclass(frozen=True)
 class Thresholds:
     near_m: float = 0.17  # grip site to an object's body origin for a close to be a grasp on it
+    reach_m: float = 0.30  # ... or to the nearest target, for a long close that shut on air
+    air_close_steps: int = 20  # 1 s: a close on air that long was meant as a grasp (shorter: command flicker)
+    shut_m: float = 0.005  # finger opening of a hand shut on nothing (~1 mm; ~17 mm around a drawer handle)
     grasp_window: int = 20  # steps (1 s): an open command this soon before a drop released it
     min_run: int = 3  # steps a state must last to count (filters one-step flicker)
     merge_gap: int = 8  # closed runs apart by fewer open steps are one close (command flicker)
@@ -168,6 +178,14 @@ def closes(ev: Evidence, th: Thresholds) -> list[tuple[int, int]]:
     return out
 
 
+def _shut_on_air(ev: Evidence, th: Thresholds, s: int, e: int, dist: dict[str, float]) -> str | None:
+    """The target a close farther than `near_m` from every object was a grasp on, if any."""
+    targets = [o for o in ev.targets if o in dist and dist[o] <= th.reach_m]
+    if not targets or e - s < th.air_close_steps or e >= len(ev):  # (cut by the horizon: still under way)
+        return None
+    return min(targets, key=dist.get) if ev.gripper_opening[e - 1] < th.shut_m else None
+
+
 def grasp_missed(ev: Evidence, th: Thresholds) -> list[SimEvent]:
     out = []
     all_holds = holds(ev, th)
@@ -180,9 +198,10 @@ def grasp_missed(ev: Evidence, th: Thresholds) -> list[SimEvent]:
         dist = {o: float(ev.col("eef_distance", o)[s]) for o in ev.objects}
         near_targets = [o for o in ev.targets if o in dist and dist[o] <= th.near_m]
         near = min(near_targets or dist, key=dist.get) if dist else None
+        if near is not None and dist[near] > th.near_m:
+            near = _shut_on_air(ev, th, s, e, dist)
         squeezed = any(s <= h < e for h, _, _ in all_holds)  # it held an object: a grasp, not a fist on a part
-        if near is None or dist[near] > th.near_m or any(s <= h < e for h in starts) or \
-                (touching_part[s:e].any() and not squeezed):
+        if near is None or any(s <= h < e for h in starts) or (touching_part[s:e].any() and not squeezed):
             continue
         out.append(_ev(ev, s, "grasp_missed", near, detail=f"closed {dist[near]:.3f} m from {near}'s origin, "
                                                             "nothing held"))
