@@ -264,7 +264,7 @@ def attempt(r: Round, _: bool) -> Plan:
     if isinstance(ctx.noise, RetryNoise):
         ctx.noise.attempt = r.tries[sub]
     if sub[0] == Predicate.IN and insert.can_insert(s, sub):
-        yield from insert.insert(ctx, sub)  # through a door opening, under a roof
+        yield from insert.insert(ctx, sub, insert.ACROSS_SPEED)  # through a door opening, under a roof
     elif r.put:
         yield from pick_place_once(ctx, sub, r.tries[sub])
     elif sub not in goal and not articulated.is_closed_enough(s.env, sub[1]):  # open, but too short
