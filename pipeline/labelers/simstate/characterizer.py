@@ -6,8 +6,10 @@ Output: `pipeline.records.Characterization` with source "simstate" (raw_text hol
 measurements the decision used, for reviewers).
 
 What the failure did is measured between the onset state and the end of the during-failure
-phase (the scene once stable again), but at least MIN_EFFECT_STEPS past the onset, per
-object: how far it moved, its tilt, whether the robot still holds it.
+phase (the scene once stable again), but at least MIN_EFFECT_STEPS past the onset, and while
+the robot still touches the onset event's object, until it lets go (at most
+TOUCH_MAX_STEPS, then LET_GO_STEPS), per object: how far it moved, its tilt, whether the
+robot still holds it.
 
 Level (first rule that matches):
 - L4  a non-target object (or a fixture) now obstructs: it moved >= MOVED_M or toppled during
@@ -49,6 +51,11 @@ TILT_DEG, TOPPLE_DEG = 10.0, 45.0
 # measure the change at least 2 s past the onset: a topple or a fall plays out (the truth
 # waits for the attempt's end); the tuning run gave the same level accuracy from 0.5 to 2 s
 MIN_EFFECT_STEPS = 40
+# ... and, while the robot still touches the object the onset concerns, until it lets go (at
+# most TOUCH_MAX_STEPS past the onset) and LET_GO_STEPS more: fingers closed on a mug's side
+# tipped it 31 -> 38 deg in the first 2 s and over, 86 deg, once the hand rose off it
+# (tuning run tunetime; the truth, which waits for the attempt's end, says L3)
+TOUCH_MAX_STEPS, LET_GO_STEPS = 80, 10
 LAND_STEPS = 30  # a drop that lands on its reference this soon was released over it
 
 
@@ -58,6 +65,19 @@ def _onset_event(loc: Localization) -> SimEvent | None:
         return at[0]
     near = [e for e in loc.events if abs(e.time_s - loc.fail_time_s) <= 1.0]
     return min(near, key=lambda e: abs(e.time_s - loc.fail_time_s)) if near else None
+
+
+def _let_go(ev: Evidence, event: SimEvent | None, onset: int) -> int:
+    """The step LET_GO_STEPS after the robot stopped touching the onset event's object
+    (within TOUCH_MAX_STEPS of the onset); the onset when it is not touching it."""
+    if event is None or event.object not in ev.objects:
+        return onset
+    key = "|".join(sorted((event.object, "robot")))
+    cap = min(len(ev) - 1, onset + TOUCH_MAX_STEPS)
+    t = onset
+    while t < cap and key in ev.contacts[t]:
+        t += 1
+    return onset if t == onset else min(cap, t + LET_GO_STEPS)
 
 
 def _changes(ev: Evidence, a: int, b: int) -> dict[str, dict]:
@@ -125,6 +145,7 @@ def _category(ev: Evidence, event: SimEvent | None, fixtures: list[str]) -> Cate
 def characterize(loc: Localization, ev: Evidence) -> Characterization:
     onset = min(loc.fail_step, len(ev) - 1)
     end = min(max(loc.phases.during[1] - 1, onset + MIN_EFFECT_STEPS), len(ev) - 1)
+    end = max(end, _let_go(ev, _onset_event(loc), onset))
     ch = _changes(ev, onset, end)
     level, obstacle = _level(ev, ch, end)
     event = _onset_event(loc)

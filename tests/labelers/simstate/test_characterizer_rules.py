@@ -145,3 +145,24 @@ def test_a_goal_on_a_fixture_region_names_the_region_and_a_container_goal_its_co
     ev.fixtures = ["basket_1"]
     action = characterize(_loc(), ev).recovery_action
     assert "in the basket" in action and "contain" not in action
+
+
+def test_a_target_the_fingers_still_press_is_measured_once_they_let_go():
+    # tunetime: fingers closed on a mug's side tipped it 31 -> 38 deg in the first 2 s, and
+    # over (86 deg) once the hand rose off it; the truth, measured at the attempt's end, is L3
+    n = 200
+    ev = make_evidence(n=n)
+    ev.per_object["tilt_deg"]["bowl_1"][ONSET + 1:] = 35.0
+    ev.per_object["tilt_deg"]["bowl_1"][90:] = 80.0
+    loc = Localization(key="s/t/e", suite="s", task="t", episode_id="e", instruction="put the bowl on the plate",
+                       source="simstate", fail_time_s=ONSET / 20, fail_step=ONSET,
+                       phases=Phases(pre=(0, ONSET), during=(ONSET, END), post=(END, n)),
+                       scene_bddl="", scene_state="", events=[_event("grasp_missed")])
+    assert characterize(loc, ev).recovery_level == Level.L2  # let go at once: measured 2 s on, tipping
+    for t in range(ONSET, 85):
+        ev.contacts[t] = ["bowl_1|robot"]
+    c = characterize(loc, ev)
+    assert c.recovery_level == Level.L3 and json.loads(c.raw_text)["end_step"] == 95  # let go at 85, + 10
+    for t in range(ONSET, n):
+        ev.contacts[t] = ["bowl_1|robot"]
+    assert json.loads(characterize(loc, ev).raw_text)["end_step"] == ONSET + 80  # at most 4 s on
