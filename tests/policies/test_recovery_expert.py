@@ -477,3 +477,14 @@ def test_a_mug_carried_by_its_handle_across_the_microwave_stays_aimed_at_the_ope
     out = tune26_attempt(tmp_path, "libero_10", "KITCHEN_SCENE6_put_the_yellow_and_white_mug_in_the_microwave_and_close_it",
                          1237910369, 117)
     assert out.success and out.steps <= 520, out
+
+
+@pytest.mark.sim
+def test_a_drawer_left_open_above_the_one_to_open_is_shut_first(tmp_path):
+    """A tuning run's scene (tunetime: libero_90 KITCHEN_SCENE1, init state 3, step 247):
+    the generator left the middle drawer fully open; its front hangs over the bottom
+    drawer's handle, so the hook from above pulled on nothing until the horizon. Pushed shut
+    first, the bottom drawer opens in under 300 steps."""
+    out = tune26_attempt(tmp_path, "libero_90", "KITCHEN_SCENE1_open_the_bottom_drawer_of_the_cabinet", 846456545, 247,
+                         init=3)
+    assert out.success and out.steps <= 300, out

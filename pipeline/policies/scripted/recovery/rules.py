@@ -223,6 +223,38 @@ def move_aside_of_sweep(r: Round, how: tuple[str, np.ndarray]) -> Plan:
     yield from put_aside(r.ctx, obj, r.aside[obj] - 1, forbid=[sweep])
 
 
+def drawer_open_above(r: Round) -> str | None:
+    """The drawer to open sits under another drawer of the same cabinet that is open (and
+    need not be): its front hangs over the lower one's handle, and the hand going for the
+    handle meets it (watched: tunetime, KITCHEN_SCENE1's middle drawer left fully open by
+    the generator; hooking the bottom one from above pulled on nothing until the horizon)."""
+    s, sub = r.ctx.scene, r.sub
+    env = s.env
+    if not (sub[0] == Predicate.OPEN and (joint := articulated.part_joint(env, sub[1])) is not None
+            and env.joint_frame(joint).kind == JointKind.SLIDE and articulated.is_closed_enough(env, sub[1])):
+        return None
+    fixture = env.region(sub[1]).parent if env.is_region(sub[1]) else sub[1]
+    needed = {g[1] for g in r.goal if g[0] == Predicate.OPEN} | {articulated.openable(env, g[2]) for g in r.goal
+                                                                 if g[0] == Predicate.IN}
+    z = env.region(sub[1]).pos[2] if env.is_region(sub[1]) else None
+    if z is None:
+        return None
+    for reg in env.region_names:
+        other = articulated.part_joint(env, reg) if env.is_region(reg) and env.region(reg).parent == fixture else None
+        if other in (None, joint) or reg in needed or r.shut[reg] >= MAX_ASIDE:
+            continue
+        fr = env.joint_frame(other)
+        if fr.kind == JointKind.SLIDE and env.region(reg).pos[2] > z and not articulated.is_closed_enough(env, reg):
+            debug("close the drawer above first", reg)
+            return reg
+    return None
+
+
+def shut_drawer_above(r: Round, region: str) -> Plan:
+    r.shut[region] += 1
+    yield from operate_once(r.ctx, (Predicate.CLOSE, region))
+
+
 def proud_in_drawer(r: Round) -> tuple[str, str] | None:
     """After a failed push: an object sticking up out of the drawer jams it."""
     s, sub = r.ctx.scene, r.sub
@@ -285,6 +317,7 @@ RULES: tuple[Rule, ...] = (
     Rule("the arm touches something, sits low or awkwardly", always, arm_back, replan=False),
     Rule("something stands in the way of the pick and place", in_the_way, move_aside),
     Rule("the drawer to open would overhang a goal object", under_the_opening_drawer, move_aside_of_sweep),
+    Rule("an open drawer above overhangs the drawer to open", drawer_open_above, shut_drawer_above),
     Rule("an object stands proud in the drawer that did not close", proud_in_drawer, re_place),
     Rule("the subgoal failed MAX_TRIES times", tried_out, give_up),
     Rule("one attempt at the subgoal", always, attempt),
