@@ -31,7 +31,10 @@ Rules:
   is a grasp.
   Step: the first closed step. Object: that object.
 - grasp_lost: a hold ends while the gripper is still commanded closed, after it had raised
-  the object >= `lift_m`. Step: the first ungrasped step.
+  the object >= `lift_m`. Step: the first ungrasped step. (For this rule, the drop and the
+  misplacement below, a hold that the same object's next hold follows within
+  `regrip_steps` did not end: the object shifted in the fingers, or the command flickered
+  open and shut again, and it never left the hand.)
 - object_dropped: a hold ends while the object is supported by nothing but the robot, and
   within `drop_window` steps it falls >= `drop_m`, and goal progress does not rise (for >=
   `min_run` states above its level when the hold began or ended, whichever is lower: a
@@ -98,6 +101,7 @@ class Thresholds:
     min_run: int = 3  # steps a state must last to count (filters one-step flicker)
     merge_gap: int = 8  # closed runs apart by fewer open steps are one close (command flicker)
     hold_steps: int = 6  # states in hand that make a hold (fewer: brushing, a pinch that slips)
+    regrip_steps: int = 20  # a hold of the same object again this soon: it never left the hand
     lift_m: float = 0.003  # a hold that never raised its object this much (its first motion, as motion_m)
     # and slipped out of the closed fingers was no grasp
     drop_window: int = 30
@@ -216,6 +220,8 @@ def grasp_lost_and_dropped(ev: Evidence, th: Thresholds) -> list[SimEvent]:
     for s, e, obj in all_holds:
         if e >= n or unlifted_slip(ev, th, s, e, obj):
             continue  # still held at the end, or a grasp that never took (grasp_missed)
+        if any(h[2] == obj and e < h[0] < e + th.regrip_steps for h in all_holds):
+            continue  # held again at once: it shifted in the fingers, it never left the hand
         lift = ev.col("lift", obj)
         window = slice(e, min(n, e + th.drop_window))
         fell = float(lift[e - 1] - lift[window].min())

@@ -144,6 +144,22 @@ def test_a_target_set_down_without_goal_progress_is_misplaced_at_the_open_comman
     assert (e.kind, e.step, e.object) == ("object_misplaced", 40, "bowl_1")
 
 
+@pytest.mark.parametrize(("regrip_at", "misplaced"), [(52, False), (62, True)])
+def test_a_target_held_again_at_once_never_left_the_hand(regrip_at, misplaced):
+    # tuning runs: the command flickered open mid-carry, the mug shifted in the fingers
+    # (fell 1-4 mm) and was held again 3-14 steps later; called a misplacement 4-5 s early
+    ev = make_evidence(n=90)
+    ev.gripper_command[10:] = 1.0
+    ev.gripper_command[38:44] = -1.0  # the flicker
+    ev.grasped[12:42] = ["bowl_1"] * 30
+    ev.grasped[regrip_at:] = ["bowl_1"] * (90 - regrip_at)
+    ev.per_object["lift"]["bowl_1"][16:] = 0.05
+    for t in range(42, regrip_at):
+        ev.contacts[t] = ["bowl_1|table"]
+    kinds = [(e.kind, e.step) for e in grasp_lost_and_dropped(ev, TH)]
+    assert kinds == ([("object_misplaced", 38)] if misplaced else [])
+
+
 def test_fingers_that_open_on_a_target_they_never_raised_misplaced_nothing():
     ev = make_evidence()
     ev.gripper_command[10:40] = 1.0
