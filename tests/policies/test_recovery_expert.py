@@ -488,3 +488,15 @@ def test_a_drawer_left_open_above_the_one_to_open_is_shut_first(tmp_path):
     out = tune26_attempt(tmp_path, "libero_90", "KITCHEN_SCENE1_open_the_bottom_drawer_of_the_cabinet", 846456545, 247,
                          init=3)
     assert out.success and out.steps <= 300, out
+
+
+@pytest.mark.sim
+def test_a_fist_that_would_wind_the_wrist_onto_its_limit_pushes_turned_by_half_a_turn(tmp_path):
+    """A tuning run's scene (tunetime: libero_10 KITCHEN_SCENE4, the bowl into the bottom
+    drawer and close it, init state 2, step 112): with the bowl in, the fist turned to its
+    fixed yaw wound the wrist's last joint from 2.6 onto its 2.9 rad limit, and the arm
+    flailed until the horizon. A fist pushes alike turned by pi: turned the other way round
+    it shuts the drawer at step ~410."""
+    out = tune26_attempt(tmp_path, "libero_10", "KITCHEN_SCENE4_put_the_black_bowl_in_the_bottom_drawer_of_the_cabinet_and_close_it",
+                         656804229, 112, init=2)
+    assert out.success and out.steps <= 450, out

@@ -187,7 +187,7 @@ def _push_drawer(ctx: Ctx, joint: str) -> Plan:
     pos[k] = front + d * 0.035
     # the palm is 20 cm long along the closing axis: turn it across the push direction so
     # it does not reach the cabinet face above the drawer before the fingers push it shut
-    yaw = np.pi / 2 if k == 1 else 0.0
+    yaw = fist_yaw(ctx, np.pi / 2 if k == 1 else 0.0)
     ctx.yaw_hold = yaw
     if s.gripper_open():
         yield Grip(1.0, ctx.close_steps, label="make_fist")
@@ -200,6 +200,24 @@ def _push_drawer(ctx: Ctx, joint: str) -> Plan:
     yield ctx.move(target, gripper=1.0, speed=0.6, yaw=yaw, tol=0.008, max_steps=60, label="push")
     yield ctx.move(s.eef() + pull * 0.04, gripper=1.0, yaw=yaw, tol=0.015, max_steps=20, label="back_off")
     yield ctx.move(s.eef() + [0, 0, 0.08], gripper=1.0, yaw=yaw, tol=0.02, max_steps=30, label="retreat")
+
+
+def fist_yaw(ctx: Ctx, yaw: float) -> float:
+    """`yaw`, or for a recovery context (`Ctx.fist_wrist_free`) whichever of yaw, yaw +- pi
+    leaves the wrist's last joint farthest inside its limits once the hand has turned there
+    the short way (watched: a fist turned to its fixed yaw wound joint 7 from 2.6 onto its
+    2.9 limit, and the arm flailed 130 steps before the push)."""
+    if not ctx.fist_wrist_free:
+        return yaw
+    q, limits = ctx.scene.env.arm_joints()
+    lo, hi = limits[6]
+
+    def room(y: float) -> float:
+        # a hand pointing down turns about -z: its yaw turns the last joint the other way
+        q7 = q[6] - float((y - ctx.yaw_hold + np.pi) % (2 * np.pi) - np.pi)
+        return min(q7 - lo, hi - q7)
+
+    return max((yaw, yaw - np.pi, yaw + np.pi), key=room)
 
 
 def fist_into(pull: np.ndarray, pitch: float) -> np.ndarray:
@@ -227,7 +245,7 @@ def _push_low_drawer(ctx: Ctx, joint: str) -> Plan:
     # fingertips (~1 cm below the grip site) over the handle bar, under the part's top
     pos[2] = max(part_top - 0.012, box[1, 2] + 0.02)
     pos[k] = face + d * (FINGER_HALF + 0.01)
-    yaw = np.pi / 2 if k == 1 else 0.0  # the palm's long side across the push
+    yaw = fist_yaw(ctx, np.pi / 2 if k == 1 else 0.0)  # the palm's long side across the push
     point = fist_into(pull, PUSH_PITCH)
     ctx.yaw_hold = yaw
     if s.gripper_open():

@@ -43,6 +43,9 @@ class Ctx:
     close_steps: int = 14
     open_steps: int = 8
     yaw_hold: float = 0.0  # hand yaw while carrying (the yaw it grasped with)
+    # a closed fist pushes alike turned by pi: choose the turn that keeps the wrist's last
+    # joint off its limits (the recovery expert; the generator keeps its fixed yaw)
+    fist_wrist_free: bool = False
     approach_hold: np.ndarray | None = None  # set while the hand is tilted (drawer handles)
     events: list[Note] = field(default_factory=list)  # what went wrong, in order (for reports)
     truth: TruthLog | None = None  # the generator's own record (None: not recorded)
