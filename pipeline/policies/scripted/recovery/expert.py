@@ -80,7 +80,8 @@ class RecoveryExpert(ScriptedPolicy):
     def _start(self, env) -> tuple[Ctx, Plan]:
         noise = RetryNoise(self.cfg.noise, episode_rng(self._seed, self._task_id or env.task.task_id))
         scene = Scene(env)
-        ctx = Ctx(scene=scene, noise=noise, max_attempts=1, truth=TruthLog(scene, 0.0, noise.speed), fist_wrist_free=True)
+        ctx = Ctx(scene=scene, noise=noise, max_attempts=1, truth=TruthLog(scene, 0.0, noise.speed),
+                  fist_wrist_free=True)
         return ctx, self._run(ctx)
 
     def _run(self, ctx: Ctx) -> Plan:

@@ -228,17 +228,13 @@ def drawer_open_above(r: Round) -> str | None:
     need not be): its front hangs over the lower one's handle, and the hand going for the
     handle meets it (watched: tunetime, KITCHEN_SCENE1's middle drawer left fully open by
     the generator; hooking the bottom one from above pulled on nothing until the horizon)."""
-    s, sub = r.ctx.scene, r.sub
-    env = s.env
-    if not (sub[0] == Predicate.OPEN and (joint := articulated.part_joint(env, sub[1])) is not None
+    env, sub = r.ctx.scene.env, r.sub
+    if not (sub[0] == Predicate.OPEN and env.is_region(sub[1]) and (joint := articulated.part_joint(env, sub[1]))
             and env.joint_frame(joint).kind == JointKind.SLIDE and articulated.is_closed_enough(env, sub[1])):
         return None
-    fixture = env.region(sub[1]).parent if env.is_region(sub[1]) else sub[1]
+    fixture, z = env.region(sub[1]).parent, env.region(sub[1]).pos[2]
     needed = {g[1] for g in r.goal if g[0] == Predicate.OPEN} | {articulated.openable(env, g[2]) for g in r.goal
                                                                  if g[0] == Predicate.IN}
-    z = env.region(sub[1]).pos[2] if env.is_region(sub[1]) else None
-    if z is None:
-        return None
     for reg in env.region_names:
         other = articulated.part_joint(env, reg) if env.is_region(reg) and env.region(reg).parent == fixture else None
         if other in (None, joint) or reg in needed or r.shut[reg] >= MAX_ASIDE:
