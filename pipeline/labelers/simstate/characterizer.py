@@ -144,11 +144,11 @@ def _category(ev: Evidence, event: SimEvent | None, fixtures: list[str]) -> Cate
 
 def characterize(loc: Localization, ev: Evidence) -> Characterization:
     onset = min(loc.fail_step, len(ev) - 1)
+    event = _onset_event(loc)
     end = min(max(loc.phases.during[1] - 1, onset + MIN_EFFECT_STEPS), len(ev) - 1)
-    end = max(end, _let_go(ev, _onset_event(loc), onset))
+    end = max(end, _let_go(ev, event, onset))
     ch = _changes(ev, onset, end)
     level, obstacle = _level(ev, ch, end)
-    event = _onset_event(loc)
     category = _category(ev, event, ev.fixtures)
     about = event.object if event is not None and event.object else (ev.targets[0] if ev.targets else None)
     toppled = about in ch and ch[about]["tilt"] >= TOPPLE_DEG
