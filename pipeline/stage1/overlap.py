@@ -2,7 +2,8 @@
 
 A `RenderOverlapStage` runs each unit's physics in the worker (`simulate`), handing every
 episode that needs videos to the worker's render process (`submit`, render_pool.py) and
-going on with the next unit while the frames are drawn and encoded. A unit is finished (the
+going on with the next unit while the frames are drawn and encoded (one unit ahead at most,
+so markers follow the physics closely). A unit is finished (the
 runner writes its marker) only once all its videos are back, all before `stream` returns,
 and on a fatal error too. A unit whose physics raises is set aside (`set_aside`); one whose
 videos fail is set aside as `RenderError` (`render_failed`); a render process that died
@@ -88,8 +89,8 @@ class RenderOverlapStage(Stage[U]):
             result = self.render_failed(p.unit, p.error) if p.error is not None else p.complete(p.videos)
             finish(p.unit, result.model_copy(update={"inputs": p.inputs}))
 
-        def collect(wait: bool) -> None:
-            for ticket, videos, error in renders.results(wait) if renders is not None else []:
+        def collect(leave: int | None) -> None:
+            for ticket, videos, error in renders.results(leave) if renders is not None else []:
                 uid, i = tickets.pop(ticket)
                 p = pending.get(uid)
                 if p is None:  # its unit failed after submitting; already set aside
@@ -108,7 +109,7 @@ class RenderOverlapStage(Stage[U]):
                 try:
                     env = self.unit_env(unit, ctx)
                     if renders is not None and not renders.alive:  # fail what it held, take a fresh one
-                        collect(wait=False)
+                        collect(None)
                         renders = render_process(ctx)
                     if renders is not None:
                         renders.prepare(env, v.resolution, v.quality)  # model loads during the physics
@@ -132,6 +133,9 @@ class RenderOverlapStage(Stage[U]):
                     continue
                 p.complete = complete
                 settle(uid)
-                collect(wait=False)
+                # the next unit's physics overlaps this unit's videos, no more: a renderer slower
+                # than the physics would otherwise hold every marker (and each unit's states)
+                # back until the shard ends, and a kill would lose all that work
+                collect(leave=p.outstanding)
         finally:
-            collect(wait=True)  # also on a fatal error: finished videos still get their markers
+            collect(leave=0)  # also on a fatal error: finished videos still get their markers

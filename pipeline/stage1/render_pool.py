@@ -131,10 +131,12 @@ class RenderProcess:
         self._jobs.put(("model", str(path), size, quality))
         self._model_key, self._model_ref = (id(model), size, quality), model
 
-    def results(self, wait: bool) -> list[Result]:
-        """Finished tickets; with `wait`, block until every submitted one is back."""
+    def results(self, leave: int | None = None) -> list[Result]:
+        """Finished tickets; with `leave`, block until at most that many are still out (0: all
+        back), without it take only what is back already."""
         out: list[Result] = []
         while self._outstanding:
+            wait = leave is not None and len(self._outstanding) > leave
             try:
                 ticket, videos, error = self._results.get(timeout=1.0 if wait else 0.0)
             except queue_mod.Empty:

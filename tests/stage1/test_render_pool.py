@@ -131,3 +131,19 @@ def test_model_files_of_dead_workers_are_swept_and_live_ones_kept(tmp_path):
         p.write_bytes(b"x")
     assert sweep_orphaned_models(tmp_path) == 1
     assert not dead.exists() and live.exists() and other.exists()
+
+
+@pytest.mark.sim
+def test_physics_runs_at_most_one_episode_ahead_of_a_slow_render_process(tmp_path, monkeypatch, ctx, events):
+    """A renderer slower than the physics (here: nothing is ever back at a glance) must not hold
+    every marker back to the shard's end: a kill then would lose all the shard's work."""
+    cfg = _cfg(tmp_path, init_states=(4, 5, 6))
+    units = plan_units(cfg)
+    results = RenderProcess.results
+    monkeypatch.setattr(RenderProcess, "results",
+                        lambda self, leave=None: [] if leave is None else results(self, leave))
+    assert run_shard(_shard(cfg, units), ctx) == 3
+    order = [(e.kind, e.unit) for e in events]
+    first, _, third = (u.unit_id for u in units)
+    assert order.index(("done", first)) < order.index(("started", third))
+    assert order[-1] == ("done", third)
