@@ -500,3 +500,21 @@ def test_a_fist_that_would_wind_the_wrist_onto_its_limit_pushes_turned_by_half_a
     out = tune26_attempt(tmp_path, "libero_10", "KITCHEN_SCENE4_put_the_black_bowl_in_the_bottom_drawer_of_the_cabinet_and_close_it",
                          656804229, 112, init=2)
     assert out.success and out.steps <= 450, out
+
+
+@pytest.mark.sim
+@pytest.mark.parametrize("scene, seed, step, init, steps", [
+    ("STUDY_SCENE2", 1169323443, 198, 0, 250),
+    ("STUDY_SCENE3", 349502892, 258, 1, 510),
+])
+def test_a_book_leaning_toward_the_robot_is_turned_upright_in_its_plane_first(tmp_path, scene, seed, step, init, steps):
+    """Two tuning scenes (tunebooks: libero_90 STUDY_SCENE2 and STUDY_SCENE3, the book into
+    the right compartment): the book leans 43-46 deg on the caddy, its faces standing, its
+    top toward the robot's base. The hand along its axis folded the elbow onto its limit 9 cm
+    short of the top edge, twice, until the horizon. Grasped with the hand pointing down and
+    turned in its own plane, on while it lags short of upright in the fingers, it stands
+    (STUDY_SCENE2: set down in the compartment itself, done at step ~165; STUDY_SCENE3:
+    turned twice, then slotted at step ~495)."""
+    out = tune26_attempt(tmp_path, "libero_90", f"{scene}_pick_up_the_book_and_place_it_in_the_right_compartment_of_the_caddy",
+                         seed, step, init=init)
+    assert out.success and out.steps <= steps, out

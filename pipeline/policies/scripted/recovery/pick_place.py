@@ -21,7 +21,7 @@ from pipeline.policies.scripted.recovery import checks
 from pipeline.policies.scripted.recovery.long_grasp import lying_long, slide_clear
 from pipeline.policies.scripted.recovery.nudge import palm_clear, push, push_plan
 from pipeline.policies.scripted.recovery.lying_cup import grasp_by_handle, lying_handle_grasp, place_by_handle
-from pipeline.policies.scripted.recovery.stand_book import quarter_turn, slot_size, stand_tilt, stand_up, too_steep
+from pipeline.policies.scripted.recovery.stand_book import quarter_turn, slot_size, stand_tilt, stand_up, turn_first
 from pipeline.policies.scripted.skills import place
 from pipeline.policies.scripted.slot import place_in_slot, slot_alignment
 from pipeline.policies.scripted.stack import carried
@@ -90,8 +90,9 @@ def pick_place_once(ctx: Ctx, conjunct: tuple[str, ...], attempt: int) -> Plan:
     book = None  # a book this attempt stands up in the hand
     if not carried(s, obj, checks.held(s)):
         book = stand_tilt(s, obj)
-        if book is not None and too_steep(book):
-            yield from quarter_turn(ctx, obj, book)  # nearer standing: the next attempt goes on
+        turn = None if book is None else turn_first(s, book)
+        if turn is not None:
+            yield from quarter_turn(ctx, obj, book, *turn)  # nearer standing: the next attempt goes on
             if ctx.truth is not None:
                 ctx.truth.end_hand(obj, False)
             return

@@ -20,7 +20,9 @@ its side, or standing on its top edge, upside down: its origin then cannot get i
 compartment) is turned by a quarter at a time: `quarter_turn` holds it by a top corner with
 the hand pitched 45 deg along the book's plane, lifts it, pitches the hand 45 deg the other
 way, sets it down where it was and lets go. Upside down takes two quarters, then the book
-stands and is grasped from above as usual.
+stands and is grasped from above as usual. A book whose top leans toward the robot's base,
+its faces standing, is turned the same way by its whole tilt (`turn_first`): the hand along
+its axis is out of reach there.
 """
 
 from __future__ import annotations
@@ -60,6 +62,11 @@ STEEP = np.radians(65.0)  # hand tilts beyond this are made TURN_ABOVE_M above t
 TURN_ABOVE_M = 0.15
 TURN_CLEAR_M = 0.05  # lowest corner above the table while the book turns
 PITCH = np.radians(45.0)  # hand pitch either way for a quarter turn
+FACES_STAND = 0.3  # faces' normal more level than this (sine of its elevation): it turns in its plane
+LEANS_TO_BASE = 0.5  # its up axis's level part this near (cosine) the way to the robot's base
+LEAN_OVERSHOOT = np.radians(10.0)  # turned past its tilt by this (it lags the hand: 17-29 deg measured)
+LAG_TOL = np.radians(5.0)  # ... and on while it lags short of upright by more than this
+STRAIGHTEN_TRIES = 2
 CORNER_DEPTH_M = 0.03  # grip site inside the corner along the hand's axis
 PUT_DOWN_GAP = 0.008  # book's lowest point above the table when it is let go
 
@@ -111,6 +118,24 @@ def stand_tilt(scene: Scene, obj: str) -> BookAxes | None:
 
 def too_steep(ax: BookAxes) -> bool:
     return _tilt(ax.up) > MAX_TILT
+
+
+def turn_first(scene: Scene, ax: BookAxes) -> tuple[float, float, bool] | None:
+    """How to turn a tilted book in its own plane before it is grasped, as `quarter_turn`'s
+    (angle, grasp pitch, upright), or None when `stand_up` takes it as it lies. Too steep: a quarter,
+    the hand pitched half of it either way. Its faces standing and its top leaning toward
+    the robot's base: the hand along its axis would point away from the base close to it,
+    and the elbow folds to its limit short of the top edge (measured: joint 4 at -3.07 rad,
+    9 cm off; two tuning scenes, both timeouts, while the four leaning away were certified).
+    It is grasped with the hand pointing down and turned by its tilt and LEAN_OVERSHOOT, the
+    hand pitching toward the base: the book lags the hand as it pivots in the fingers."""
+    if too_steep(ax):
+        return 2 * PITCH, PITCH, False
+    to_base = (scene.env.robot_base() - ax.top_mid)[:2]
+    toward = float(ax.up[:2] @ to_base) / max(float(np.linalg.norm(to_base)), 1e-6)
+    if abs(float(ax.thin[2])) < FACES_STAND and toward > LEANS_TO_BASE:
+        return _tilt(ax.up) + LEAN_OVERSHOOT, 0.0, True
+    return None
 
 
 def _tilt(up: np.ndarray) -> float:
@@ -166,10 +191,12 @@ def _off_upright(s: Scene, obj: str) -> float:
     return 0.0 if ax is None else _tilt(ax.up)
 
 
-def quarter_turn(ctx: Ctx, obj: str, ax: BookAxes) -> Plan:
-    """Turn the book by a quarter in its own plane toward standing: hold it by a top corner
-    with the hand pitched PITCH one way along its plane, lift, pitch the hand as far the
-    other way, set it down where it was, let go."""
+def quarter_turn(ctx: Ctx, obj: str, ax: BookAxes, angle: float = 2 * PITCH, grasp_pitch: float = PITCH,
+                 upright: bool = False) -> Plan:
+    """Turn the book by `angle` (a quarter) in its own plane toward standing: hold it by a top
+    corner with the hand pitched `grasp_pitch` one way along its plane, lift, pitch the hand
+    the rest of `angle` the other way (`upright`: on, while the book lags short of upright),
+    set it down where it was, let go."""
     s = ctx.scene
     side = np.cross(ax.thin, ax.up)
     corners = _plane_corners(ax)
@@ -177,10 +204,11 @@ def quarter_turn(ctx: Ctx, obj: str, ax: BookAxes) -> Plan:
     m /= max(float(np.linalg.norm(m)), 1e-6)
     down = np.array([0.0, 0.0, -1.0])
     best = None
+    p1, p2 = grasp_pitch, angle - grasp_pitch
     for sg in (1.0, -1.0):  # pitch the hand toward +m, then toward -m; or the other way
-        a1 = np.cos(PITCH) * down + np.sin(PITCH) * m * sg
-        a2 = np.cos(PITCH) * down - np.sin(PITCH) * m * sg
-        turn = axis_angle_matrix(np.cross(a1, a2), 2 * PITCH)
+        a1 = np.cos(p1) * down + np.sin(p1) * m * sg
+        a2 = np.cos(p2) * down - np.sin(p2) * m * sg
+        turn = axis_angle_matrix(np.cross(a1, a2), angle)
         gain = float((turn @ ax.up)[2] - ax.up[2])  # how much nearer standing it gets
         if best is None or gain > best[0]:
             best = (gain, a1, a2)
@@ -195,6 +223,8 @@ def quarter_turn(ctx: Ctx, obj: str, ax: BookAxes) -> Plan:
     was = s.box(obj).centre[:2]  # a free spot: the book stood there
     yield from _edge_grasp_turn(ctx, obj, held, lift=max(lift, 0.04), to=a2, rot_tol=0.06)
     yield Grip(1.0, SETTLE_STEPS // 2, label="settle")
+    if upright:
+        a2 = yield from _straighten(ctx, obj, np.cross(a1, a2), a2)
     box = s.box(obj)
     gap = box.lo[2] - s.support_top(was, 0.01, {obj})
     # turning about the grip site carried the book aside: back over where it was
@@ -216,6 +246,32 @@ def quarter_turn(ctx: Ctx, obj: str, ax: BookAxes) -> Plan:
         ctx.yaw_hold = yaw2 - np.pi if yaw2 > 0 else yaw2 + np.pi
         yield ctx.move(s.eef() + [0.0, 0.0, 0.04], yaw=ctx.yaw_hold, tol=0.03, rot_tol=0.1, max_steps=40,
                        label="unwind")
+
+
+def _straighten(ctx: Ctx, obj: str, axis: np.ndarray, approach: np.ndarray) -> Plan:
+    """Pitch the hand on about `axis` (the turn's) while the book it holds lags more than
+    LAG_TOL short of upright, as far as MAX_TILT; returns the hand's approach then. Held by
+    a corner, the book pivots in the fingers by a varying amount (measured: 17-29 deg on
+    two tuning scenes), and set down short of upright it falls back to leaning."""
+    s = ctx.scene
+    n = axis / max(float(np.linalg.norm(axis)), 1e-9)
+    for _ in range(STRAIGHTEN_TRIES):
+        ax = book_axes(s, obj)
+        if ax is None:
+            break
+        lag = float(np.arctan2(np.cross(ax.up, [0.0, 0.0, 1.0]) @ n, ax.up[2]))
+        step = min(lag, MAX_TILT - float(np.arccos(np.clip(-approach[2], -1.0, 1.0))))
+        if step < LAG_TOL:
+            break
+        approach = axis_angle_matrix(n, step) @ approach
+        ctx.approach_hold = approach
+        try:
+            yield ctx.move(s.eef(), gripper=1.0, yaw=ctx.yaw_hold, approach=approach, tol=0.03, rot_tol=0.06,
+                           max_steps=40, label="straighten")
+            yield Grip(1.0, SETTLE_STEPS // 2, label="settle")
+        finally:
+            ctx.approach_hold = None
+    return approach
 
 
 def _rot_off(s: Scene, yaw: float, approach: np.ndarray | None) -> float:
