@@ -63,6 +63,15 @@ class Evidence:
     def col(self, column: str, obj: str) -> np.ndarray:
         return self.per_object[column][obj]
 
+    def touching(self, t: int, a: str, b: str) -> bool:
+        """Whether `a` and `b` touch at row `t`."""
+        return contact_key(a, b) in self.contacts[t]
+
+
+def contact_key(a: str, b: str) -> str:
+    """How `Evidence.contacts` names a pair touching: "a|b", the two names sorted."""
+    return "|".join(sorted((a, b)))
+
 
 def owner_of(name: str, known: list[str]) -> str:
     """The object/fixture a region name belongs to ('plate_1_contain_region' -> 'plate_1')."""
@@ -142,7 +151,7 @@ def compute_evidence(env, states: np.ndarray, gripper_actions: np.ndarray, contr
         opening[t] = env.gripper_opening()
         left, right = env.finger_contacts()
         grasped.append(_grasped(left, right, lift, objects))
-        contacts.append(sorted(f"{a}|{b}" for a, b in env.contacts()))
+        contacts.append(sorted(contact_key(a, b) for a, b in env.contacts()))
         conj = env.goal_conjuncts()
         progress[t] = sum(ok for _, ok in conj) / max(1, len(conj))
     return Evidence(

@@ -42,7 +42,7 @@ import json
 
 import numpy as np
 
-from pipeline.evidence import Evidence, owner_of
+from pipeline.evidence import Evidence, contact_key, owner_of
 from pipeline.labelers.simstate.wording import recovery_action
 from pipeline.records import Category, Characterization, EventKind, Level, Localization, SimEvent
 
@@ -72,7 +72,7 @@ def _let_go(ev: Evidence, event: SimEvent | None, onset: int) -> int:
     (within TOUCH_MAX_STEPS of the onset); the onset when it is not touching it."""
     if event is None or event.object not in ev.objects:
         return onset
-    key = "|".join(sorted((event.object, "robot")))
+    key = contact_key(event.object, "robot")
     cap = min(len(ev) - 1, onset + TOUCH_MAX_STEPS)
     t = onset
     while t < cap and key in ev.contacts[t]:
@@ -97,7 +97,7 @@ def _level(ev: Evidence, ch: dict[str, dict], end: int) -> tuple[Level, str | No
             continue
         disturbed = c["moved"] >= MOVED_M or c["tilt"] >= TOPPLE_DEG > c["tilt"] - c["tilt_gain"]
         near = [f for f in focus if np.linalg.norm(c["xy"] - ch[f]["xy"]) <= OBSTRUCT_M]
-        touching = [f for f in focus if "|".join(sorted((o, f))) in ev.contacts[end]]
+        touching = [f for f in focus if ev.touching(end, o, f)]
         if disturbed and (near or touching):
             return Level.L4, o
     for o in ev.targets:
@@ -127,7 +127,7 @@ def _category(ev: Evidence, event: SimEvent | None, fixtures: list[str]) -> Cate
         pos = {o: ev.col("position", o)[event.step, :2] for o in ev.objects}
         near = any(np.linalg.norm(pos[obj] - pos[r]) <= PLACE_NEAR_M for r in refs if r in pos)
         after = ev.contacts[event.step:event.step + LAND_STEPS]
-        landed = any("|".join(sorted((obj, r))) in c for r in refs for c in after)
+        landed = any(contact_key(obj, r) in c for r in refs for c in after)
         return Category.placement_failure if near or landed else Category.grasp_failure
     if k == EventKind.object_misplaced:
         return Category.placement_failure

@@ -87,7 +87,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.evidence import Evidence, owner_of
+from pipeline.evidence import Evidence, contact_key, owner_of
 from pipeline.records import EventKind, SimEvent
 
 
@@ -140,7 +140,7 @@ def _ev(ev: Evidence, step: int, kind: str, obj: str | None = None, other: str |
 
 
 def _pair_mask(ev: Evidence, a: str, b: str) -> np.ndarray:
-    key = "|".join(sorted((a, b)))
+    key = contact_key(a, b)
     return np.array([key in c for c in ev.contacts])
 
 
@@ -319,7 +319,7 @@ def held_collisions(ev: Evidence, th: Thresholds) -> list[SimEvent]:
     out = []
     for hs, he, obj in holds(ev, th):
         for thing in ev.objects + ev.fixtures:
-            if thing in ev.references or thing == obj or "|".join(sorted((obj, thing))) in ev.contacts[hs]:
+            if thing in ev.references or thing == obj or ev.touching(hs, obj, thing):
                 continue  # a reference, or what it rested on when the hold began
             mask = _pair_mask(ev, obj, thing)[hs:he]
             for s, e in _runs(mask):
