@@ -18,18 +18,18 @@ from pipeline.policies.scripted.motion import Ctx, Plan, free_hand, grasp, place
 from pipeline.policies.scripted.notes import Note, Outcome
 from pipeline.policies.scripted.placement import destination, inside_region, place_choice, support_ceiling
 from pipeline.policies.scripted.stack import carried
-from pipeline.policies.scripted.strategies import PLACEMENTS
+from pipeline.policies.scripted.strategies import placement_for
 
 
 def place(ctx: Ctx, obj: str, target: str, stand: bool = False, shift: np.ndarray | None = None) -> Plan:
     """`stand`: see `place_at` (the recovery expert). `shift`: xy subtracted from the spot of a
     plain placement (the recovery expert centres a lying long object's length on the region;
     the own-way placements above, shelves, slots, a pan slid in, are not shifted)."""
-    for strategy in PLACEMENTS:
-        how = strategy.applies(ctx, obj, target)
-        if how is not None:
-            yield from strategy.plan(ctx, obj, target, how)
-            return
+    found = placement_for(ctx, obj, target)
+    if found is not None:
+        strategy, how = found
+        yield from strategy.plan(ctx, obj, target, how)
+        return
     xy, _, turn = place_choice(ctx.scene, obj, target)
     if shift is not None:
         # centring the length may not take the body origin off the region: a frying pan's

@@ -31,3 +31,15 @@ PLACEMENTS: tuple[Placement, ...] = tuple(
     # a pan into a shelf compartment by its handle; a tall object laid in a shallow drawer
     for m in (shelf, tip_push, slot, slide_in, lay_down)
 )
+
+
+def placement_for(ctx: Ctx, obj: str, target: str, before: Callable | None = None) -> tuple[Placement, Any] | None:
+    """The first strategy that takes `obj` to `target` its own way, with its `applies`
+    answer, or None; `before`: only among the strategies ahead of the one whose plan it is."""
+    for strategy in PLACEMENTS:
+        if strategy.plan is before:
+            return None
+        how = strategy.applies(ctx, obj, target)
+        if how is not None:
+            return strategy, how
+    return None

@@ -25,7 +25,7 @@ from pipeline.policies.scripted.recovery.stand_book import quarter_turn, slot_si
 from pipeline.policies.scripted.skills import place
 from pipeline.policies.scripted.slot import place_in_slot, slot_alignment
 from pipeline.policies.scripted.stack import carried
-from pipeline.policies.scripted.strategies import PLACEMENTS
+from pipeline.policies.scripted.strategies import placement_for
 
 TURN_TOL = 0.15  # radians of yaw still to turn at which the hand may go down to grasp
 # a grasp this far (horizontally) from the robot base hovers at least FAR_HOVER_M over it:
@@ -64,7 +64,7 @@ def tilted_spot(ctx: Ctx, obj: str, target: str) -> np.ndarray | None:
     s = ctx.scene
     region = s.env.region(target)
     normal = region.mat[2]
-    if not TILT_MIN_COS < normal[2] < TILT_COS or any(p.applies(ctx, obj, target) is not None for p in PLACEMENTS):
+    if not TILT_MIN_COS < normal[2] < TILT_COS or placement_for(ctx, obj, target) is not None:
         return None
     return region.pos[:2] + normal[:2] * (s.box(obj).size[2] / 2 + TILT_MARGIN_M)
 
@@ -73,11 +73,8 @@ def book_slot(ctx: Ctx, obj: str, target: str) -> float | None:
     """The slot skill's alignment for a book this attempt stood up in the hand, judged by
     the book's own size (`stand_book.slot_size`); None where a placement strategy before
     the slot skill takes it (a shelf) or it does not fit."""
-    for p in PLACEMENTS:
-        if p.plan is place_in_slot:
-            break
-        if p.applies(ctx, obj, target) is not None:
-            return None
+    if placement_for(ctx, obj, target, before=place_in_slot) is not None:
+        return None
     size = slot_size(ctx.scene, obj)
     return None if size is None else slot_alignment(ctx, obj, target, size=size)
 
