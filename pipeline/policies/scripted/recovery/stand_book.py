@@ -122,13 +122,14 @@ def too_steep(ax: BookAxes) -> bool:
 
 def turn_first(scene: Scene, ax: BookAxes) -> tuple[float, float, bool] | None:
     """How to turn a tilted book in its own plane before it is grasped, as `quarter_turn`'s
-    (angle, grasp pitch, upright), or None when `stand_up` takes it as it lies. Too steep: a quarter,
-    the hand pitched half of it either way. Its faces standing and its top leaning toward
-    the robot's base: the hand along its axis would point away from the base close to it,
-    and the elbow folds to its limit short of the top edge (measured: joint 4 at -3.07 rad,
-    9 cm off; two tuning scenes, both timeouts, while the four leaning away were certified).
-    It is grasped with the hand pointing down and turned by its tilt and LEAN_OVERSHOOT, the
-    hand pitching toward the base: the book lags the hand as it pivots in the fingers."""
+    (angle, grasp pitch, upright), or None when `stand_up` takes it as it lies. Too steep:
+    a quarter, the hand pitched half of it either way. Its faces standing and its top
+    leaning toward the robot's base: the hand along its axis would point away from the base
+    close to it, and the elbow folds to its limit short of the top edge (measured: joint 4
+    at -3.07 rad, 9 cm off; two tuning scenes, both timeouts, while the four leaning away
+    were certified). It is grasped with the hand pointing down and turned by its tilt and
+    LEAN_OVERSHOOT, the hand pitching toward the base, and on until it stands (it lags the
+    hand as it pivots in the fingers)."""
     if too_steep(ax):
         return 2 * PITCH, PITCH, False
     to_base = (scene.env.robot_base() - ax.top_mid)[:2]
