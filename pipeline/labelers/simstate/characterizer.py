@@ -72,10 +72,9 @@ def _let_go(ev: Evidence, event: SimEvent | None, onset: int) -> int:
     (within TOUCH_MAX_STEPS of the onset); the onset when it is not touching it."""
     if event is None or event.object not in ev.objects:
         return onset
-    key = contact_key(event.object, "robot")
     cap = min(len(ev) - 1, onset + TOUCH_MAX_STEPS)
     t = onset
-    while t < cap and key in ev.contacts[t]:
+    while t < cap and ev.touching(t, event.object, "robot"):
         t += 1
     return onset if t == onset else min(cap, t + LET_GO_STEPS)
 

@@ -232,15 +232,16 @@ def drawer_open_above(r: Round) -> str | None:
     if not (sub[0] == Predicate.OPEN and env.is_region(sub[1]) and (joint := articulated.part_joint(env, sub[1]))
             and env.joint_frame(joint).kind == JointKind.SLIDE and articulated.is_closed_enough(env, sub[1])):
         return None
-    fixture, z = env.region(sub[1]).parent, env.region(sub[1]).pos[2]
+    below = env.region(sub[1])
     needed = {g[1] for g in r.goal if g[0] == Predicate.OPEN} | {articulated.openable(env, g[2]) for g in r.goal
                                                                  if g[0] == Predicate.IN}
     for reg in env.region_names:
-        other = articulated.part_joint(env, reg) if env.is_region(reg) and env.region(reg).parent == fixture else None
+        region = env.region(reg) if env.is_region(reg) else None
+        other = articulated.part_joint(env, reg) if region is not None and region.parent == below.parent else None
         if other in (None, joint) or reg in needed or r.shut[reg] >= MAX_ASIDE:
             continue
         fr = env.joint_frame(other)
-        if fr.kind == JointKind.SLIDE and env.region(reg).pos[2] > z and not articulated.is_closed_enough(env, reg):
+        if fr.kind == JointKind.SLIDE and region.pos[2] > below.pos[2] and not articulated.is_closed_enough(env, reg):
             debug("close the drawer above first", reg)
             return reg
     return None
