@@ -79,13 +79,21 @@ def answer_text(raw: str) -> tuple[str | None, Quarantine | None]:
     cut = max((raw.rfind(m) + len(m) for m in END_MARKERS if m in raw), default=-1)
     if cut >= 0:
         text = raw[cut:]
-    elif any(m in raw for m in START_MARKERS):
+    elif _thinking_opened(raw):
         return None, Quarantine(reason=QuarantineReason.truncated, detail="thinking never closed", raw_text=raw)
     else:
         text = raw
     if not text.strip():
         return None, Quarantine(reason=QuarantineReason.empty, detail="no answer text", raw_text=raw)
     return text.strip(), None
+
+
+def _thinking_opened(raw: str) -> bool:
+    """A reasoning start marker before any JSON object began: thinking that was cut off. One
+    after the first `{` is text inside the answer (an action that names a tag), not thinking."""
+    starts = [raw.find(m) for m in START_MARKERS if m in raw]
+    brace = raw.find("{")
+    return bool(starts) and (brace < 0 or min(starts) < brace)
 
 
 class _DuplicateKey(ValueError):
