@@ -364,10 +364,18 @@ def test_a_far_bowl_is_grasped_from_a_higher_hover(tmp_path):
     # the bowl beside the cabinet: its rim grasp's palm box looked 1 cm into the cabinet, and
     # the grasp chosen instead dropped it twice (timeout)
     ("libero_90", 1, 0),
+    # the milk carton, knocked over by a missed grasp, turned to fit the basket: turned onto
+    # the wrist's limit it stalled on the way and came down short of the basket (timeout)
+    ("libero_object", 7, 0),
+    # both moka pots: the second, lowered beside the first and held off its spot by it, was
+    # moved over before letting go and toppled (timeout)
+    ("libero_10", 8, 0),
 ])
 def test_zero_noise_episodes_a_grasp_change_once_broke(suite, index, init):
     """From official init states at zero noise, as scripted_success.py measures them: only a
-    far rim grasp hovers higher, and a rim grasp's first attempt trusts the fingertip rays."""
+    far rim grasp hovers higher, a rim grasp's first attempt trusts the fingertip rays, a
+    container's turn keeps the wrist in range, and only a placement onto an object is
+    measured and moved over before the fingers open."""
     task = tasks([suite])[index]
     env = build_env(task)
     try:
@@ -517,4 +525,26 @@ def test_a_book_leaning_toward_the_robot_is_turned_upright_in_its_plane_first(tm
     turned twice, then slotted at step ~495)."""
     out = tune26_attempt(tmp_path, "libero_90", f"{scene}_pick_up_the_book_and_place_it_in_the_right_compartment_of_the_caddy",
                          seed, step, init=init)
+    assert out.success and out.steps <= steps, out
+
+
+@pytest.mark.sim
+@pytest.mark.parametrize("suite, task, seed, step, init, steps", [
+    # the ketchup lying 15.2 cm long over a 12.3 cm basket region: laid along the diagonal
+    ("libero_90", "LIVING_ROOM_SCENE1_pick_up_the_ketchup_and_put_it_in_the_basket", 979863995, 87, 4, 200),
+    # the fist dragging the top drawer further out, turned the way that leaves the wrist room
+    ("libero_90", "KITCHEN_SCENE1_open_the_top_drawer_of_the_cabinet_and_put_the_bowl_in_it", 1026427236, 329, 0, 470),
+    # the white mug held by its rim, set down 3-4 cm off the plate's middle: moved over first
+    ("libero_90", "LIVING_ROOM_SCENE5_put_the_white_mug_on_the_left_plate", 300379228, 133, 1, 150),
+])
+def test_version_10_certifies_three_tuning_scenes_version_9_did_not(tmp_path, suite, task, seed, step, init, steps):
+    """Three tuning scenes version 9 left uncertified (tunetime, tunemix, tunemug). The ketchup,
+    carried as it lay, came down across the basket's rims with its body 2 cm above the region,
+    three times; turned to the diagonal it goes in (step ~128). The fist that drags a cramped
+    drawer out wound the wrist's last joint onto its limit at a fixed yaw and crawled 165 steps
+    to the drawer; turned by half a turn it gets there in ~40 and the bowl is in at step ~415.
+    The white mug, held by its rim, hangs tilted and straightens as it is pressed down: it
+    landed 3.0-3.7 cm off the plate's middle four times (LIBERO's `On` wants 3 cm); measured
+    once lowered and moved over before the fingers open, it is on the plate at step ~90."""
+    out = tune26_attempt(tmp_path, suite, task, seed, step, init=init)
     assert out.success and out.steps <= steps, out

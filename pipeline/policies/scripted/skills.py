@@ -21,8 +21,9 @@ from pipeline.policies.scripted.stack import carried
 from pipeline.policies.scripted.strategies import placement_for
 
 
-def place(ctx: Ctx, obj: str, target: str, stand: bool = False, shift: np.ndarray | None = None) -> Plan:
-    """`stand`: see `place_at` (the recovery expert). `shift`: xy subtracted from the spot of a
+def place(ctx: Ctx, obj: str, target: str, stand: bool = False, shift: np.ndarray | None = None,
+          recheck: bool = False) -> Plan:
+    """`stand`, `recheck`: see `place_at` (the recovery expert). `shift`: xy subtracted from the spot of a
     plain placement (the recovery expert centres a lying long object's length on the region;
     the own-way placements above, shelves, slots, a pan slid in, are not shifted)."""
     found = placement_for(ctx, obj, target)
@@ -36,7 +37,8 @@ def place(ctx: Ctx, obj: str, target: str, stand: bool = False, shift: np.ndarra
         # origin is in its pan, 9 cm from its box centre, and was set down beside the stove's
         # cook region, on the stove but not `On` it, four times running
         xy = inside_region(ctx.scene.env, target, xy - shift)
-    yield from place_at(ctx, obj, xy, support_ceiling(ctx.scene.env, target), stand=stand, turn=turn)
+    yield from place_at(ctx, obj, xy, support_ceiling(ctx.scene.env, target), stand=stand, turn=turn,
+                        recheck=recheck)
 
 
 def pick_place(ctx: Ctx, conjunct: tuple[str, ...]) -> Plan:
