@@ -319,7 +319,7 @@ def test_a_drawer_low_over_the_table_is_hooked_open_from_above():
 
 def tune26_attempt(tmp_path, suite: str, task: str, seed: int, step: int, horizon: int = 520, init: int = 4):
     """Remake a tuning run's (tune26: init state 4, default noise; other tuning runs: `init`
-    0-3) failure scene at `step` by stage 1's own code and run the zero-noise recovery expert
+    0-4) failure scene at `step` by stage 1's own code and run the zero-noise recovery expert
     from it with `horizon` (the release's by default); its `Outcome`."""
     from pipeline.release.experts import attempt, recovery_expert
     from pipeline.sim import get_task
