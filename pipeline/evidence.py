@@ -67,6 +67,20 @@ class Evidence:
         """Whether `a` and `b` touch at row `t`."""
         return contact_key(a, b) in self.contacts[t]
 
+    def touching_what(self, t: int, obj: str) -> set[str]:
+        """What touches `obj` at row `t` (the other name of each pair it is in)."""
+        out = set()
+        for pair in self.contacts[t]:
+            a, _, b = pair.partition("|")
+            if obj in (a, b):
+                out.add(b if a == obj else a)
+        return out
+
+    def pair_mask(self, a: str, b: str) -> np.ndarray:
+        """(T,) bool: rows where `a` and `b` touch."""
+        key = contact_key(a, b)
+        return np.array([key in c for c in self.contacts], dtype=bool)
+
 
 def contact_key(a: str, b: str) -> str:
     """How `Evidence.contacts` names a pair touching: "a|b", the two names sorted."""

@@ -9,6 +9,7 @@ import pytest
 
 from pipeline.evidence import read_evidence, write_evidence
 from tests.stage2.conftest import episodes, evidences, spatial_env, stage1_run  # noqa: F401
+from tests.stage2.evidence_factory import make_evidence
 from tests.stage2.rollouts import OTHER_BOWL, TARGET, plan_step
 
 @pytest.mark.sim
@@ -31,6 +32,20 @@ def test_knocked_bowl_shows_displacement_and_robot_contact(evidences):
     assert ev.col("displacement", TARGET).max() < 0.005
     assert any(f"{OTHER_BOWL}|robot" in c for c in ev.contacts)
     assert all(g == "" for g in ev.grasped)
+    # the pair helpers read the same contacts: the rows the robot touches the knocked bowl
+    hit = ev.pair_mask("robot", OTHER_BOWL)
+    assert hit.any() and not ev.pair_mask("robot", TARGET).any()
+    t = int(np.argmax(hit))
+    assert "robot" in ev.touching_what(t, OTHER_BOWL) and ev.touching(t, OTHER_BOWL, "robot")
+
+
+def test_touching_what_names_each_pair_partner_and_no_name_that_merely_contains_it():
+    """Pairs are "a|b", sorted: a name that is another's prefix or suffix is not the same name."""
+    ev = make_evidence(n=2, objects=("bowl_1", "black_bowl_1", "bowl_12"))
+    ev.contacts[1] = ["black_bowl_1|table", "bowl_1|robot", "bowl_12|plate_1", "bowl_1|plate_1"]
+    assert ev.touching_what(1, "bowl_1") == {"robot", "plate_1"}
+    assert ev.touching_what(1, "black_bowl_1") == {"table"} and ev.touching_what(0, "bowl_1") == set()
+    assert ev.pair_mask("plate_1", "bowl_1").tolist() == [False, True]
 
 
 @pytest.mark.sim

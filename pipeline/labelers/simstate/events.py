@@ -87,7 +87,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.evidence import Evidence, contact_key, owner_of
+from pipeline.evidence import Evidence, owner_of
 from pipeline.records import EventKind, SimEvent
 
 
@@ -137,11 +137,6 @@ def _merged(mask: np.ndarray, gap: int) -> list[tuple[int, int]]:
 def _ev(ev: Evidence, step: int, kind: str, obj: str | None = None, other: str | None = None, detail: str = ""):
     return SimEvent(step=int(step), time_s=float(step / ev.control_hz), kind=kind, object=obj, other=other,
                     detail=detail)
-
-
-def _pair_mask(ev: Evidence, a: str, b: str) -> np.ndarray:
-    key = contact_key(a, b)
-    return np.array([key in c for c in ev.contacts])
 
 
 def operated(ev: Evidence) -> list[str]:
@@ -197,7 +192,7 @@ def grasp_missed(ev: Evidence, th: Thresholds) -> list[SimEvent]:
     parts = operated(ev)
     touching_part = np.zeros(len(ev), bool)
     for p in parts:
-        touching_part |= _pair_mask(ev, p, "robot")
+        touching_part |= ev.pair_mask(p, "robot")
     for s, e in closes(ev, th):
         dist = {o: float(ev.col("eef_distance", o)[s]) for o in ev.objects}
         near_targets = [o for o in ev.targets if o in dist and dist[o] <= th.near_m]
@@ -225,8 +220,7 @@ def grasp_lost_and_dropped(ev: Evidence, th: Thresholds) -> list[SimEvent]:
         lift = ev.col("lift", obj)
         window = slice(e, min(n, e + th.drop_window))
         fell = float(lift[e - 1] - lift[window].min())
-        supported = any(c.startswith(f"{obj}|") or c.endswith(f"|{obj}") for c in ev.contacts[e - 1]
-                        if "robot" not in c.split("|"))
+        supported = bool(ev.touching_what(e - 1, obj) - {"robot"})
         nxt = next((h for h, _, _ in all_holds if h > e), n)
         base = min(ev.goal_progress[s], ev.goal_progress[e - 1])  # a predicate true in the hand is no placement yet
         after = ev.goal_progress[e:max(e + 1, min(nxt, e + 2 * th.drop_window))] > base + 1e-6
@@ -286,7 +280,7 @@ def displaced(ev: Evidence, th: Thresholds) -> list[SimEvent]:
             k = int(far[0])
             still = np.flatnonzero(disp[:k] < th.motion_m)
             step = int(still[-1]) + 1 if len(still) else 0
-            touch = [r for r in _merged(_pair_mask(ev, obj, "robot"), th.merge_gap) if r[0] <= k <= r[1]]
+            touch = [r for r in _merged(ev.pair_mask(obj, "robot"), th.merge_gap) if r[0] <= k <= r[1]]
             if touch:  # pushed: it jiggles in place under the hand before it slides
                 step = min(step, touch[0][0] + int(np.argmax(disp[touch[0][0]:k + 1] >= th.motion_m)))
             out.append(_ev(ev, step, EventKind.unintended_displacement, obj, detail=f"moved {disp[k]:.3f} m without a grasp"))
@@ -306,7 +300,7 @@ def robot_contacts(ev: Evidence, th: Thresholds) -> list[SimEvent]:
     for thing in ev.objects + ev.fixtures:
         if thing in relevant:
             continue
-        for s, e in _runs(_pair_mask(ev, thing, "robot")):
+        for s, e in _runs(ev.pair_mask(thing, "robot")):
             moved = _moved_during(ev, thing, s, e)
             if moved >= th.displace_m or (thing not in ev.objects and e - s >= th.fixture_contact_steps):
                 out.append(_ev(ev, s, "robot_contact_non_target", thing, "robot",
@@ -321,7 +315,7 @@ def held_collisions(ev: Evidence, th: Thresholds) -> list[SimEvent]:
         for thing in ev.objects + ev.fixtures:
             if thing in ev.references or thing == obj or ev.touching(hs, obj, thing):
                 continue  # a reference, or what it rested on when the hold began
-            mask = _pair_mask(ev, obj, thing)[hs:he]
+            mask = ev.pair_mask(obj, thing)[hs:he]
             for s, e in _runs(mask):
                 s, e = s + hs, e + hs
                 moved = _moved_during(ev, thing, s, e)
@@ -338,7 +332,7 @@ def parts_not_operated(ev: Evidence, th: Thresholds) -> list[SimEvent]:
     dist = np.stack([ev.col("eef_distance", o) for o in ev.objects]) if ev.objects else np.full((1, len(ev)), np.inf)
     far = dist.min(axis=0) > th.near_m
     for part in operated(ev):
-        touching = _pair_mask(ev, part, "robot")
+        touching = ev.pair_mask(part, "robot")
         gripping = touching & (ev.gripper_command > 0) & free  # a handle, a knob, or a fist pushing
         sessions = [r for r in _merged(gripping, th.merge_gap) if r[1] - r[0] >= th.operate_steps]
         for s, e in closes(ev, th):  # closed on air where the part is (a knob missed), then let go
