@@ -209,15 +209,17 @@ def fist_yaw(ctx: Ctx, yaw: float) -> float:
     2.9 limit, and the arm flailed 130 steps before the push)."""
     if not ctx.fist_wrist_free:
         return yaw
-    q, limits = ctx.scene.env.arm_joints()
+    return max((yaw, yaw - np.pi, yaw + np.pi),
+               key=lambda y: wrist_room(ctx.scene, float((y - ctx.yaw_hold + np.pi) % (2 * np.pi) - np.pi)))
+
+
+def wrist_room(s, turn: float) -> float:
+    """Radians the wrist's last joint stays inside its limits once a hand pointing down has
+    turned its yaw by `turn` (it turns about -z: the joint turns the other way)."""
+    q, limits = s.env.arm_joints()
     lo, hi = limits[6]
-
-    def room(y: float) -> float:
-        # a hand pointing down turns about -z: its yaw turns the last joint the other way
-        q7 = q[6] - float((y - ctx.yaw_hold + np.pi) % (2 * np.pi) - np.pi)
-        return min(q7 - lo, hi - q7)
-
-    return max((yaw, yaw - np.pi, yaw + np.pi), key=room)
+    q7 = q[6] - turn
+    return min(q7 - lo, hi - q7)
 
 
 def fist_into(pull: np.ndarray, pitch: float) -> np.ndarray:

@@ -201,9 +201,9 @@ def place_at(ctx: Ctx, obj: str, xy: np.ndarray, below: float = np.inf, stand: b
     early = {"switch_gripper": -1.0, "switch_dist": 0.006 * -t} if t < 0 else {}
     # (stood up: the pot's low edge on the support stops the hand ~1 cm short of the goal;
     # a wider tolerance lets go there instead of pressing out the step limit)
-    yield ctx.move(goal, gripper=1.0, speed=0.5, yaw=yaw, tol=0.01 if up is None else STAND_TOL, max_steps=60,
-                   label="lower", **early)
+    lower_tol = 0.01 if up is None else STAND_TOL
+    yield ctx.move(goal, gripper=1.0, speed=0.5, yaw=yaw, tol=lower_tol, max_steps=60, label="lower", **early)
     if recheck:
-        yield from _reaim(ctx, obj, dest, goal, yaw, STAND_TOL if up is not None else 0.01)
+        yield from _reaim(ctx, obj, dest, goal, yaw, lower_tol)
     yield Grip(-1.0, ctx.open_steps + max(t, 0), label="open")
     yield ctx.move(s.eef() + [0, 0, 0.08], yaw=yaw, tol=0.02, label="retreat")

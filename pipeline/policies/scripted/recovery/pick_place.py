@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from pipeline.policies.scripted.articulated import wrist_room
 from pipeline.policies.scripted.grasps import plan_grasp
 from pipeline.policies.scripted.hand import Grasp
 from pipeline.policies.scripted.motion import Ctx, Plan, free_hand, grasp, place_at
@@ -100,19 +101,14 @@ def container_turn(ctx: Ctx, obj: str, target: str) -> float:
         size = turned_foot(s, obj, turn)[0] if turn else s.box(obj).size[:2]
         return round(float(np.max(size - span)), 3)  # mm
 
-    least = min(overflow(t) for t in (0.0, *FIT_TURNS))
-    if overflow(0.0) <= max(least, 0.0):
+    over = {t: overflow(t) for t in (0.0, *FIT_TURNS)}
+    least = min(over.values())
+    if over[0.0] <= max(least, 0.0):
         return 0.0
-    q, limits = s.env.arm_joints()
-    lo, hi = limits[6]
-
-    def room(turn: float) -> float:
-        q7 = q[6] - turn  # a hand pointing down turns about -z: its yaw turns the joint the other way
-        return min(q7 - lo, hi - q7)
-
-    fits = [t + k * np.pi for t in FIT_TURNS if overflow(t) <= least for k in (0, -1, 1)]
-    roomy = [t for t in fits if room(t) >= WRIST_ROOM]
-    return min(roomy, key=abs) if roomy else max(fits, key=room)
+    fits = [t + k * np.pi for t in FIT_TURNS if over[t] <= least for k in (0, -1, 1)]
+    room = {t: wrist_room(s, t) for t in fits}
+    roomy = [t for t in fits if room[t] >= WRIST_ROOM]
+    return min(roomy, key=abs) if roomy else max(fits, key=room.get)
 
 
 def book_slot(ctx: Ctx, obj: str, target: str) -> float | None:

@@ -236,8 +236,8 @@ def drawer_open_above(r: Round) -> str | None:
     needed = {g[1] for g in r.goal if g[0] == Predicate.OPEN} | {articulated.openable(env, g[2]) for g in r.goal
                                                                  if g[0] == Predicate.IN}
     for reg in env.region_names:
-        region = env.region(reg) if env.is_region(reg) else None
-        other = articulated.part_joint(env, reg) if region is not None and region.parent == below.parent else None
+        region = env.region(reg)
+        other = articulated.part_joint(env, reg) if region.parent == below.parent else None
         if other in (None, joint) or reg in needed or r.shut[reg] >= MAX_ASIDE:
             continue
         fr = env.joint_frame(other)
