@@ -548,3 +548,51 @@ def test_version_10_certifies_three_tuning_scenes_version_9_did_not(tmp_path, su
     once lowered and moved over before the fingers open, it is on the plate at step ~90."""
     out = tune26_attempt(tmp_path, suite, task, seed, step, init=init)
     assert out.success and out.steps <= steps, out
+
+
+@pytest.mark.sim
+@pytest.mark.parametrize("suite, task, seed, step, init, steps", [
+    # a lying bottle's middle too near the shoulder: grasped 4.5 cm along it, further out
+    ("libero_90", "LIVING_ROOM_SCENE4_pick_up_the_salad_dressing_and_put_it_in_the_tray", 1524038178, 103, 4, 360),
+    # the mug carried by its handle across to the microwave's front, the gentle leg ended sooner
+    ("libero_10", "KITCHEN_SCENE6_put_the_yellow_and_white_mug_in_the_microwave_and_close_it", 487775941, 119, 3, 515),
+])
+def test_version_11_certifies_two_tuning_scenes_version_10_did_not(tmp_path, suite, task, seed, step, init, steps):
+    """Two tuning scenes version 10 left uncertified (tune26, tunemug; both timeouts). The salad
+    dressing lies beside the robot in LIVING_ROOM_SCENE4, whose base stands nearer the objects
+    than the kitchens': the grasp at its middle, 0.37 m from the shoulder, folded the elbow onto
+    its limit 4.5 cm short, twice (missed grasp, then the horizon); slid along the bottle to
+    0.39 m it is picked up at once (in the tray at step ~320). The mug's gentle leg across to the
+    microwave stalled 3.3-3.5 cm short of its end, over the 3 cm it stopped at, and waited out
+    its 120 steps; ending 4.5 cm short, the door is shut at step ~505 (541 before)."""
+    out = tune26_attempt(tmp_path, suite, task, seed, step, init=init)
+    assert out.success and out.steps <= steps, out
+
+
+@pytest.mark.sim
+def test_an_upside_down_book_is_turned_with_the_hand_pointing_away_from_the_base(tmp_path):
+    """A tuning scene (tunebooks: libero_90 STUDY_SCENE3, the book into the left compartment,
+    init state 2, step 282): the book stands upside down on the table. Either way of turning
+    it by a quarter gets it as near standing; the hand pitched back toward the base ran joint 7
+    onto its limit, never reached the corner and drifted off (the book still upside down at
+    step 170, and at the horizon). Pitched away from the base, it holds the corner and the
+    book lies on its side by step ~150 (two quarters and the slot still take ~510 steps, a
+    timeout at the release's 520)."""
+    from pipeline.policies.scripted.recovery.stand_book import book_axes
+    from pipeline.release.experts import attempt, recovery_expert
+    from pipeline.release.scene_physics import restore_scene
+    from pipeline.sim import get_task
+    from tests.stage1.default_episode import default_episode
+
+    suite, task = "libero_90", "STUDY_SCENE3_pick_up_the_book_and_place_it_in_the_left_compartment_of_the_caddy"
+    env = build_env(get_task(suite, task))
+    try:
+        folder = default_episode(env, tmp_path, suite, task, 2, 460143849, horizon=282)
+        scene = np.load(folder / "states.npy")[282]
+        restore_scene(env, scene)
+        assert book_axes(Scene(env), "black_book_1").up[2] < -0.9  # upside down
+        attempt(env, scene, recovery_expert(env, 0, 0.0), 0, 170, 8)
+        up = book_axes(Scene(env), "black_book_1").up
+        assert abs(float(up[2])) < 0.5, up  # turned a quarter: lying on its side, not upside down
+    finally:
+        env.close()

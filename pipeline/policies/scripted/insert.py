@@ -47,7 +47,7 @@ STAGE_TURN = np.radians(8)  # a handle further off facing the hand is turned fir
 # leg's end at half command, so the gentle leg ends ACROSS_TOL short and the leg along the
 # opening, at full command, takes the rest. The recovery expert carries so; the generator
 # at full command (its own failures are the data).
-ACROSS_SPEED, ACROSS_TOL = 0.5, 0.03
+ACROSS_SPEED, ACROSS_TOL = 0.5, 0.045
 
 
 @dataclass(frozen=True)

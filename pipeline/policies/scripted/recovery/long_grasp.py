@@ -5,7 +5,9 @@ with the fingers closing across it: only a few yaws fit, so when a tall neighbou
 rack) stands where the palm's ends come down, every candidate stops on it (measured: three
 descents stopped 7 cm short on the rack, then the time ran out). Sliding the grasp point a
 few centimetres along the object, away from the neighbour, clears the palm; the bottle then
-tilts a little in the fingers, which placing copes with.
+tilts a little in the fingers, which placing copes with. A middle too near the robot's
+shoulder (`reach.underreach`: the elbow folds to its limit short of it) is slid away from it
+the same way.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from pipeline.policies.scripted.grasps import LONG_M, blocked_depth
 
 from pipeline.policies.scripted.hand import Grasp, closing_axis
 from pipeline.policies.scripted.placement import footprint_widths
+from pipeline.policies.scripted.reach import underreach
 from pipeline.policies.scripted.scene import Scene
 
 BLOCKED_M = 0.01  # the palm's way blocked by more than this: slide the grasp
@@ -58,11 +61,18 @@ def slide_clear(scene: Scene, obj: str, g: Grasp) -> Grasp:
         return g
     along, span = length
     top = scene.box(obj).hi[2]
-    block = blocked_depth(scene, g.pos, g.yaw, top, skip_tips=True)
-    if block <= BLOCKED_M:
+
+    def judge(pos: np.ndarray) -> tuple[float, bool]:
+        """(cost, good enough): centimetres too near the shoulder weigh like centimetres
+        of blocked palm; a little blocking is fine, any underreach is not."""
+        block, under = blocked_depth(scene, pos, g.yaw, top, skip_tips=True), underreach(scene.env, pos)
+        return block + under, block <= BLOCKED_M and under <= 0.0
+
+    cost, ok = judge(g.pos)
+    if ok:
         return g
     here = float(g.pos[:2] @ along)
-    best = (block, g)
+    best = (cost, ok, g)
     for d in SHIFTS:
         for sign in (-1.0, 1.0):
             at = here + sign * d
@@ -70,12 +80,12 @@ def slide_clear(scene: Scene, obj: str, g: Grasp) -> Grasp:
                 continue
             pos = g.pos.copy()
             pos[:2] += along * sign * d
-            b = blocked_depth(scene, pos, g.yaw, top, skip_tips=True)
-            if b < best[0] - 1e-3:
-                best = (b, Grasp(pos=pos, yaw=g.yaw, rim=False))
-        if best[0] <= BLOCKED_M:
+            cost, ok = judge(pos)
+            if cost < best[0] - 1e-3:
+                best = (cost, ok, Grasp(pos=pos, yaw=g.yaw, rim=False))
+        if best[1]:
             break
-    return best[1]
+    return best[2]
 
 
 def lying_long(scene: Scene, obj: str) -> bool:
