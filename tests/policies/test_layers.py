@@ -31,7 +31,7 @@ for layer, names in enumerate([
     # the recovery expert: its checks and skills, its rule table, its policy
     ["scripted.recovery.reasons", "scripted.recovery.variation", "scripted.recovery.checks",
      "scripted.recovery.back_out", "scripted.recovery.unwind", "scripted.recovery.long_grasp",
-     "scripted.recovery.nudge", "scripted.recovery.lying_cup",
+     "scripted.recovery.nudge", "scripted.recovery.lying_cup", "scripted.recovery.near_grasp",
      "scripted.recovery.stand_book", "scripted.recovery.low_drawer", "scripted.recovery.operate",
      "scripted.recovery.put_aside",
      "scripted.recovery.under_drawer", "scripted.recovery.pick_place", "scripted.recovery.rules",

@@ -23,6 +23,7 @@ from pipeline.policies.scripted.recovery import checks
 from pipeline.policies.scripted.recovery.long_grasp import lying_long, slide_clear
 from pipeline.policies.scripted.recovery.nudge import palm_clear, push, push_plan
 from pipeline.policies.scripted.recovery.lying_cup import grasp_by_handle, lying_handle_grasp, place_by_handle
+from pipeline.policies.scripted.recovery.near_grasp import pitched_approach, pitched_grasp
 from pipeline.policies.scripted.recovery.stand_book import quarter_turn, slot_size, stand_tilt, stand_up, turn_first
 from pipeline.policies.scripted.skills import place
 from pipeline.policies.scripted.slot import place_in_slot, slot_alignment
@@ -155,8 +156,14 @@ def pick_place_once(ctx: Ctx, conjunct: tuple[str, ...], attempt: int) -> Plan:
             if found is None:
                 choice = checks.clear_grasp_choice(s, obj, dest, attempt)
                 found = choice, slide_clear(s, obj, plan_grasp(s, obj, dest, choice))
-            yield from grasp(ctx, obj, dest, choice=found[0], g=found[1], hover_m=hover_height(s, found[1], attempt),
-                             turn_tol=TURN_TOL)
+            pitched = pitched_approach(s, found[1]) if lying_long(s, obj) else None
+            if pitched is not None:  # beside the base: fingertips in, wrist out (near_grasp.py)
+                by_handle = True  # ... and set down as held, like a mug by its handle: levelled,
+                # the hand would tilt the object by the pitch in its fingers
+                yield from pitched_grasp(ctx, obj, found[1], pitched)
+            else:
+                yield from grasp(ctx, obj, dest, choice=found[0], g=found[1],
+                                 hover_m=hover_height(s, found[1], attempt), turn_tol=TURN_TOL)
         if not carried(s, obj, checks.held(s)):
             ctx.events.append(Note(Outcome.MISSED_GRASP, obj))
             if ctx.truth is not None:
