@@ -138,7 +138,8 @@ def main() -> None:
     by_kind = defaultdict(list)
     for r in rows:
         by_kind[r["kind"]].append(r)
-    table = Table(title=f"recovery expert on turned books (init states 0-4, {args.tries} tries, horizon {args.horizon})")
+    table = Table(title=f"recovery expert on turned books (init states 0-4, {args.tries} tries, "
+                        f"horizon {args.horizon})")
     for col in ("pose", "scenes", "certified", "not certified, by reason"):
         table.add_column(col)
     lines = ["| pose | scenes | certified | not certified, by reason |", "|---|---|---|---|"]

@@ -4,11 +4,11 @@ With the hand pointing down, the Panda's elbow is straight when the grip site is
 0.85 m from the shoulder (measured: LIBERO kitchen scene 2, a bowl at the table's far
 corner). A straight elbow is a singularity of the operational-space controller: it cannot
 bend it again, so the arm stays stuck wherever it is carried next (transport never
-arrives). Grasps past EASY_M lose to grasp points nearer the robot. Too near, the elbow folds to its
-limit instead (joint 4 at -3.07 rad): a grip site less than NEAR_M from the shoulder, low
-beside the base, is out of reach the other way (measured: LIVING_ROOM_SCENE4, whose base
-stands closer to the objects than the kitchens': the hand stalled 0.383 m from the shoulder,
-4.5 cm short of a lying bottle's middle, until the time ran out).
+arrives). Grasps past EASY_M lose to grasp points nearer the robot. Too near, the elbow
+folds to its limit instead (joint 4 at -3.07 rad): a grip site less than NEAR_M from the
+shoulder, low beside the base, is out of reach the other way (measured: LIVING_ROOM_SCENE4,
+whose base stands closer to the objects than the kitchens': the hand stalled 0.383 m from
+the shoulder, 4.5 cm short of a lying bottle's middle, until the time ran out).
 """
 
 from __future__ import annotations
