@@ -26,6 +26,7 @@ from pipeline.policies.scripted.goal import Predicate
 from pipeline.policies.scripted.motion import Ctx, Plan, free_hand, grasp, place_at, travel
 from pipeline.policies.scripted.notes import Halt, Note, Outcome
 from pipeline.policies.scripted.primitives import Grip
+from pipeline.policies.scripted.reach import shoulder
 from pipeline.policies.scripted.scene import robot_base
 from pipeline.sim.facts import JointKind
 
@@ -35,9 +36,9 @@ DOOR_MARGIN = 0.014  # object's nearest point behind the door plane
 BACK_MARGIN = 0.012  # object's farthest point in front of the back wall
 STANDOFF_M = 0.07  # grip site behind the handle before advancing onto it
 MAX_TURN = np.radians(50)  # handle direction may differ this much from facing the opening
-# a level hand puts the wrist ~20 cm behind the grip site: the shoulder (this high above
-# the robot base) reaches it up to about REACH_M away (measured: 0.75 m works at best, 0.77 m stalls at a joint limit)
-SHOULDER_Z, WRIST_M, REACH_M = 0.333, 0.2, 0.72
+# a level hand puts the wrist ~20 cm behind the grip site: the shoulder (`reach.shoulder`)
+# reaches it up to about REACH_M away (measured: 0.75 m works at best, 0.77 m stalls at a joint limit)
+WRIST_M, REACH_M = 0.2, 0.72
 HINGE_TURN = np.radians(20)  # approach turned toward the door's hinge (see `_approach`)
 STAGE_TURN = np.radians(8)  # a handle further off facing the hand is turned first
 # A mug pinched by its upright handle turns about it when the hand starts or stops across
@@ -174,8 +175,7 @@ def _in_zone(b: np.ndarray, grip: np.ndarray, a: np.ndarray) -> bool:
 
 def _reachable(s, grip: np.ndarray, a: np.ndarray) -> bool:
     """The wrist (~20 cm behind a level hand) within the arm's reach of its shoulder."""
-    shoulder = robot_base(s) + [0.0, 0.0, SHOULDER_Z]
-    return float(np.linalg.norm(grip - a * WRIST_M - shoulder)) <= REACH_M
+    return float(np.linalg.norm(grip - a * WRIST_M - shoulder(s.env))) <= REACH_M
 
 
 def _clear(s, obj: str, body: np.ndarray, grip_rel: np.ndarray, a: np.ndarray) -> bool:

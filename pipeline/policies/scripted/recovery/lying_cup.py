@@ -126,8 +126,9 @@ def grasp_by_handle(ctx: Ctx, obj: str, g: HandleGrasp, hover_m: float = 0.08) -
     ctx.yaw_hold, ctx.approach_hold = g.yaw, g.approach
     if steps > 0:
         yield Grip(1.0, steps, label="narrow")
-    yield ctx.move(g.pos, gripper=0.0, speed=0.5, yaw=g.yaw, approach=g.approach, tol=0.007, max_steps=50,
-                   label="descend")
+    # (not narrowed, fully open: the open command, as any grasp's descent)
+    yield ctx.move(g.pos, gripper=0.0 if steps > 0 else -1.0, speed=0.5, yaw=g.yaw, approach=g.approach, tol=0.007,
+                   max_steps=50, label="descend")
     yield Grip(1.0, ctx.close_steps, label="close")
     yield ctx.move(s.eef() + [0, 0, 0.1], gripper=1.0, speed=0.6, yaw=g.yaw, approach=g.approach, tol=0.02,
                    label="pick_lift")  # (carried with the hand as it is: see place_by_handle)

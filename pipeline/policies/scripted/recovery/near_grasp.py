@@ -23,9 +23,9 @@ from __future__ import annotations
 import numpy as np
 
 from pipeline.policies.scripted.hand import Grasp, closing_axis
-from pipeline.policies.scripted.motion import HAND_CLEARANCE, Ctx, Plan, travel
-from pipeline.policies.scripted.primitives import Grip
+from pipeline.policies.scripted.motion import Ctx, Plan
 from pipeline.policies.scripted.reach import underreach
+from pipeline.policies.scripted.recovery.lying_cup import OPEN_M, HandleGrasp, grasp_by_handle
 from pipeline.policies.scripted.scene import Scene
 
 PITCH = np.radians(35.0)  # hand pitched this far from pointing down, toward the base
@@ -55,13 +55,7 @@ def pitched_approach(scene: Scene, g: Grasp) -> np.ndarray | None:
 
 
 def pitched_grasp(ctx: Ctx, obj: str, g: Grasp, approach: np.ndarray) -> Plan:
-    s = ctx.scene
-    lift_z = s.path_clearance(s.eef(), g.pos, 0.06, {obj}) + HAND_CLEARANCE
-    hover = g.pos - approach * HOVER_M
-    yield from travel(ctx, hover, g.yaw, -1.0, lift_z)
-    ctx.yaw_hold, ctx.approach_hold = g.yaw, approach
-    yield ctx.move(hover, yaw=g.yaw, approach=approach, tol=0.012, rot_tol=0.15, max_steps=60, label="hover")
-    yield ctx.move(g.pos, speed=0.5, yaw=g.yaw, approach=approach, tol=0.007, max_steps=50, label="descend")
-    yield Grip(1.0, ctx.close_steps, label="close")
-    yield ctx.move(s.eef() + [0, 0, 0.1], gripper=1.0, speed=0.6, yaw=g.yaw, approach=approach, tol=0.02,
-                   label="pick_lift")  # (carried with the hand as it is: `lying_cup.place_by_handle`)
+    """Hover back along `approach`, descend along it, close, lift: the tilted grasp of a mug's
+    handle (`lying_cup.grasp_by_handle`), with the fingers fully open."""
+    yield from grasp_by_handle(ctx, obj, HandleGrasp(pos=g.pos, yaw=g.yaw, opening=OPEN_M, approach=approach),
+                               hover_m=HOVER_M)
