@@ -9,7 +9,8 @@ one reported in the README (seed 1 init states 2-3, seed 2 init state 4).
 Terms: "closed" = gripper command > 0; a "close" is a run of closed steps, runs apart by
 fewer than `merge_gap` open steps merged (the command flickering while the hand still
 descends is one close), starting at its first run of >= `min_run` closed steps (twitches
-alone are no close); a "hold" is a run of >= `hold_steps` states with the object
+alone are no close, nor fewer than `close_steps` closed steps in all: fingers pre-shaped for
+a handle); a "hold" is a run of >= `hold_steps` states with the object
 grasped, runs apart by fewer than `min_run` states merged (shorter runs are fingers
 brushing or pinching it); "targets" = objects the goal
 moves, "references" = what the goal puts them on/in or operates, "operated" = fixtures an
@@ -99,6 +100,10 @@ class Thresholds:
     shut_m: float = 0.005  # finger opening of a hand shut on nothing (~1 mm; ~17 mm around a drawer handle)
     grasp_window: int = 20  # steps (1 s): an open command this soon before a drop released it
     min_run: int = 3  # steps a state must last to count (filters one-step flicker)
+    # a close has this many closed steps in all: 3 closed steps, then a neutral command,
+    # pre-shape the fingers for a drawer handle (7.9 -> 5.1 cm apart; the command ramps 0.25
+    # a step), no grasp (tunewide: called a missed grasp 5.4 s before the truth)
+    close_steps: int = 5
     merge_gap: int = 8  # closed runs apart by fewer open steps are one close (command flicker)
     hold_steps: int = 6  # states in hand that make a hold (fewer: brushing, a pinch that slips)
     regrip_steps: int = 20  # a hold of the same object again this soon: it never left the hand
@@ -167,12 +172,13 @@ def unlifted_slip(ev: Evidence, th: Thresholds, s: int, e: int, obj: str) -> boo
 def closes(ev: Evidence, th: Thresholds) -> list[tuple[int, int]]:
     """Closes, each from its first closed run of >= `min_run` steps: one-step twitches of the
     command before it (a hand that closes early in steps while its descent is blocked) are
-    part of the close but not its start, and twitches alone close no gripper."""
+    part of the close but not its start, and twitches alone close no gripper; nor do fewer
+    than `close_steps` closed steps in all (fingers pre-shaped for a handle)."""
     closed = ev.gripper_command > 0
     out = []
     for s, e in _merged(closed, th.merge_gap):
         held = [a for a, b in _runs(closed[s:e]) if b - a >= th.min_run]
-        if held:
+        if held and int(closed[s:e].sum()) >= th.close_steps:
             out.append((s + int(held[0]), e))
     return out
 

@@ -54,6 +54,18 @@ def test_twitches_alone_are_no_close():
     assert grasp_missed(ev, TH) == []
 
 
+@pytest.mark.parametrize(("closed_steps", "missed"), [(3, False), (4, False), (5, True), (14, True)])
+def test_fingers_pre_shaped_for_a_handle_are_no_close(closed_steps, missed):
+    # the generator half-closes the fingers before reaching a drawer's handle: 3 closed steps,
+    # then a neutral command that holds them 5 cm apart (tunewide, libero_goal's top drawer:
+    # called a missed grasp on the plate 5.4 s before the truth's drawer left half open)
+    ev = make_evidence()
+    ev.per_object["eef_distance"]["bowl_1"][:] = 0.10
+    ev.gripper_command[20:20 + closed_steps] = 1.0
+    ev.gripper_command[20 + closed_steps:60] = 0.0
+    assert [e.step for e in grasp_missed(ev, TH)] == ([20] if missed else [])
+
+
 def test_a_close_far_from_every_object_is_not_a_missed_grasp():
     ev = make_evidence()
     ev.gripper_command[20:40] = 1.0
