@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from pipeline.labelers.simstate.events import (
@@ -111,6 +112,25 @@ def test_a_squeeze_that_never_lifts_and_slips_out_closed_is_a_missed_grasp_at_th
     assert grasp_lost_and_dropped(ev, TH) == []
     [e] = grasp_missed(ev, TH)
     assert (e.kind, e.step, e.object) == ("grasp_missed", 10, "bowl_1")
+
+
+@pytest.mark.parametrize(("rise", "tipped", "pinch"), [
+    (0.020, 30.0, True),  # an edge pinched: the origin rose 2 cm as the box tipped, then out
+    (0.020, 11.0, False),  # held level enough: a grasp that slipped while lifting
+    (0.030, 30.0, False),  # raised past `pinch_lift_m`: lifted, tipped in the hand, lost
+])
+def test_a_pinch_that_tips_an_edge_up_and_slips_out_is_a_missed_grasp(rise, tipped, pinch):
+    # tunewide, LIVING_ROOM_SCENE2's cream cheese: fingers closed early on its edge, tipped it
+    # 29 deg, 2 cm up at its origin, and it squirted out (watched); the truth's missed grasp
+    ev = make_evidence()
+    ev.per_object["eef_distance"]["bowl_1"][:] = 0.05
+    ev.gripper_command[10:50] = 1.0
+    ev.grasped[20:34] = ["bowl_1"] * 14
+    ev.per_object["lift"]["bowl_1"][20:34] = np.linspace(0.0, rise, 14)
+    ev.per_object["tilt_deg"]["bowl_1"][20:34] = np.linspace(0.0, tipped, 14)
+    lost = [e.kind for e in grasp_lost_and_dropped(ev, TH)]
+    missed = [e.step for e in grasp_missed(ev, TH)]
+    assert (lost, missed) == (([], [10]) if pinch else (["grasp_lost"], []))
 
 
 def test_a_one_state_touch_after_the_release_does_not_hide_the_release():
