@@ -22,7 +22,9 @@ Rules:
   hold begins and the robot touches no operated fixture (gripping a knob or pushing a
   drawer with a fist is not a grasp; a close that held an object was a grasp, even if the
   hand brushed a fixture). A hold that never raised its object >= `lift_m` and ended with
-  the gripper still closed (squeezed on its support, it slipped out) is no grasp either.
+  the gripper still closed (squeezed on its support, it slipped out) is no grasp either, nor
+  one that tipped it >= `pinch_tilt_deg` while its origin rose < `pinch_lift_m` (an edge
+  pinched: the origin rose with the tilt).
   A close farther than `near_m` from every object is a grasp missed on the nearest target
   too when that target is within `reach_m`, the close lasted >= `air_close_steps` and the
   fingers ended shut on nothing (opening < `shut_m`): the hand shut on air short of the
