@@ -19,9 +19,9 @@ open/close/turn-on/turn-off conjunct names (all from the goal's conjuncts).
 Rules:
 - grasp_missed: a close (>= `min_run` steps) with the grip site within `near_m` of an
   object (the nearest target if one is that near, else the nearest object), during which no
-  hold begins and the robot touches no operated fixture (gripping a knob or pushing a
-  drawer with a fist is not a grasp; a close that held an object was a grasp, even if the
-  hand brushed a fixture). A hold that never raised its object >= `lift_m` and ended with
+  hold begins and the robot does not touch an operated fixture for >= `operate_steps`
+  (gripping a knob or pushing a drawer with a fist is not a grasp; a close that held an
+  object, or only brushed the fixture, was a grasp). A hold that never raised its object >= `lift_m` and ended with
   the gripper still closed (squeezed on its support, it slipped out) is no grasp either, nor
   one that tipped it >= `pinch_tilt_deg` while its origin rose < `pinch_lift_m` (an edge
   pinched: the origin rose with the tilt).
@@ -219,7 +219,10 @@ def grasp_missed(ev: Evidence, th: Thresholds) -> list[SimEvent]:
         if near is not None and dist[near] > th.near_m:
             near = _shut_on_air(ev, th, s, e, dist)
         squeezed = any(s <= h < e for h, _, _ in all_holds)  # it held an object: a grasp, not a fist on a part
-        if near is None or any(s <= h < e for h in starts) or (touching_part[s:e].any() and not squeezed):
+        # working the part (a handle or knob gripped, a fist pushing) touches it a while; a
+        # grasp that brushed it on the way does not
+        worked = int(touching_part[s:e].sum()) >= th.operate_steps
+        if near is None or any(s <= h < e for h in starts) or (worked and not squeezed):
             continue
         out.append(_ev(ev, s, "grasp_missed", near, detail=f"closed {dist[near]:.3f} m from {near}'s origin, "
                                                             "nothing held"))
