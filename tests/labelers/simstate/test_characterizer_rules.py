@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 
 from pipeline.labelers.simstate.characterizer import characterize
 from pipeline.records import Category, Level, Localization, Phases, SimEvent
@@ -67,6 +68,19 @@ def test_a_drop_released_near_its_reference_is_a_placement_failure_and_far_from_
     assert c.failure_category is Category.placement_failure
     ev.per_object["position"]["bowl_1"][ONSET] = (0.2, 0.0, 0.1)  # 30 cm away: dropped on the way
     assert characterize(_loc(_event("object_dropped")), ev).failure_category is Category.grasp_failure
+
+
+@pytest.mark.parametrize(("lowered", "category"), [(0.0, Category.grasp_failure), (0.03, Category.grasp_failure),
+                                                  (0.05, Category.placement_failure)])
+def test_a_drop_far_from_its_reference_after_the_hand_brought_it_down_is_a_placement_failure(lowered, category):
+    # tunewide, LIVING_ROOM_SCENE5: a mug lowered 6 cm and let go 15 cm beside its plate
+    # (watched from the hand's camera); drops in transit come down at most 3.6 cm first
+    ev = _evidence(objects=("bowl_1", "plate_1"), fixtures=())
+    ev.grasped[5:ONSET] = ["bowl_1"] * (ONSET - 5)
+    ev.per_object["position"]["bowl_1"][5:ONSET] = (0.2, 0.0, 0.15)  # carried 30 cm from the plate
+    ev.per_object["position"]["bowl_1"][ONSET - 6:ONSET] = (0.2, 0.0, 0.15 - lowered)
+    ev.per_object["position"]["bowl_1"][ONSET:] = (0.2, 0.0, 0.0)
+    assert characterize(_loc(_event("object_dropped")), ev).failure_category is category
 
 
 def test_a_target_set_down_in_the_wrong_place_is_a_placement_failure_wherever_it_was_let_go():
