@@ -21,10 +21,10 @@ Rules:
   object (the nearest target if one is that near, else the nearest object), during which no
   hold begins and the robot does not touch an operated fixture for >= `operate_steps`
   (gripping a knob or pushing a drawer with a fist is not a grasp; a close that held an
-  object, or only brushed the fixture, was a grasp). A hold that never raised its object >= `lift_m` and ended with
-  the gripper still closed (squeezed on its support, it slipped out) is no grasp either, nor
-  one that tipped it >= `pinch_tilt_deg` while its origin rose < `pinch_lift_m` (an edge
-  pinched: the origin rose with the tilt).
+  object, or only brushed the fixture, was a grasp). A hold that never raised its object
+  >= `lift_m` and ended with the gripper still closed (squeezed on its support, it slipped
+  out) is no grasp either, nor one that tipped it >= `pinch_tilt_deg` while its origin rose
+  < `pinch_lift_m` (an edge pinched: the origin rose with the tilt).
   A close farther than `near_m` from every object is a grasp missed on the nearest target
   too when that target is within `reach_m`, the close lasted >= `air_close_steps` and the
   fingers ended shut on nothing (opening < `shut_m`): the hand shut on air short of the
