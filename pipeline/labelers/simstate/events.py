@@ -176,8 +176,8 @@ def unlifted_slip(ev: Evidence, th: Thresholds, s: int, e: int, obj: str) -> boo
     closed = ev.gripper_command > 0
     if e >= len(ev) or not (closed[e - 1] and closed[e]):
         return False
-    rise = float(ev.col("lift", obj)[s:e].max() - ev.col("lift", obj)[s])
-    tilt = ev.col("tilt_deg", obj)
+    lift, tilt = ev.col("lift", obj), ev.col("tilt_deg", obj)
+    rise = float(lift[s:e].max() - lift[s])
     tipped = float(tilt[s:e].max() - tilt[s])
     return rise < th.lift_m or (rise < th.pinch_lift_m and tipped >= th.pinch_tilt_deg)
 
