@@ -26,6 +26,9 @@ LONG_M = 0.12  # horizontal length beyond which a whole-object grasp goes to the
 TALL_M = 0.11  # objects taller than this may be carried by a handle
 HANDLE_THIN_M, HANDLE_OUT_M = 0.016, 0.055  # a handle part: thinner than this, this far out
 UPRIGHT_COS = np.cos(np.radians(20))  # body axis this close to vertical: standing upright
+# an object whose own up axis is this far from vertical leans on something (less: it stands;
+# past LEAN_MAX it lies on its side, a pose with its own grasps)
+LEAN_MIN, LEAN_MAX = np.radians(10), np.radians(75)
 YAW_BAND = np.radians(20)  # a handle's yaw range reaches this far past pi/2 (see handle_grasp)
 YAWS = np.linspace(-np.pi / 2, np.pi / 2, 12, endpoint=False)
 # a standing book: thinner than SLAB_THIN_M, taller than SLAB_TALL_M, long. It is held near
@@ -151,9 +154,45 @@ def pan_grasp(scene: Scene, obj: str, dest: np.ndarray | None, choice: int) -> G
     return pan_handle_grasp(scene, obj)
 
 
+def leaning(scene: Scene, obj: str) -> bool:
+    """`obj` rests tilted on something, its own up axis LEAN_MIN to LEAN_MAX from vertical
+    (a bowl on a drawer's front wall or half on its side wall)."""
+    up = scene.env.object_frame(obj)[1][:, 2]
+    return bool(LEAN_MIN < np.arccos(np.clip(up[2], -1.0, 1.0)) < LEAN_MAX)
+
+
+def side_rim(scene: Scene, obj: str, side: int) -> Grasp:
+    """A leaning object's rim wall where it stands vertical: a quarter turn round the rim
+    from its highest point (`side` 0 or 1: which way), the fingers closing across it. At the
+    highest point the wall's outside faces up and the outer finger came down on it: the bowl
+    was pushed down and slipped out (measured: a bowl leaning 46 degrees in the bottom
+    drawer); a level rim grasp aims under the box top, over the lower rim, into the air."""
+    pos, rot = scene.env.object_frame(obj)
+    local = (scene.env.object_corners(obj) - pos) @ rot
+    top = float(local[:, 2].max())
+    mid = (local[:, :2].max(axis=0) + local[:, :2].min(axis=0)) / 2
+    radius = float(np.min(local[:, :2].max(axis=0) - local[:, :2].min(axis=0))) / 2
+    rise = rot[2, :2] / np.linalg.norm(rot[2, :2])  # the rim plane's steepest way up, own frame
+    across = np.array([-rise[1], rise[0]]) * (1 if side % 2 == 0 else -1)
+    rim = pos + rot @ np.array([*(mid + across * (radius - RIM_INSET)), top])
+    rim[2] -= RIM_DEPTH
+    out = rot[:2, :2] @ across
+    theta = float(np.arctan2(out[1], out[0]))
+    return Grasp(pos=rim, yaw=float(theta % np.pi - np.pi / 2), rim=True)  # closing across the wall, as rim_grasp
+
+
 def rim_grasp(scene: Scene, obj: str, dest: np.ndarray | None, choice: int) -> Grasp:
     """By the rim wall: the radial direction whose outer finger lands clear (and, with
-    `dest`, whose hand fits at the destination too)."""
+    `dest`, whose hand fits at the destination too); a leaning object first where its wall
+    stands vertical (`side_rim`, either side)."""
+    if leaning(scene, obj):
+        if choice < 2:
+            top = scene.box(obj).hi[2]
+            sides = [side_rim(scene, obj, k) for k in (0, 1)]
+            # the side a cabinet overhangs (a drawer's back) loses, as for a level rim
+            sides.sort(key=lambda g: blocked_depth(scene, g.pos, g.yaw, top) * 10 + 10 * overreach(scene.env, g.pos))
+            return sides[choice]
+        choice -= 2
     box = scene.box(obj)
     corners = scene.env.object_corners(obj)
     centre = box.centre

@@ -297,6 +297,15 @@ def proud_in_drawer(scene: Scene, joint: str, margin: float = 0.01) -> list[str]
     return out
 
 
+PERCHED_M = 0.03  # an object's bottom this far over the drawer's lowest part rests on a wall
+
+
+def perched_in_drawer(scene: Scene, joint: str, obj: str) -> bool:
+    """`obj` rests on a wall of the drawer of slide `joint`, not on its floor (measured: a
+    bowl half on the side wall, its bottom 6.6 cm up; the floor is 1.1 cm thick)."""
+    return bool(scene.box(obj).lo[2] > scene.env.joint_part_boxes(joint)[:, 0, 2].min() + PERCHED_M)
+
+
 FLOOR_CLEAR_M = 0.02  # a drawer's floor this far over an object's top passes over it
 HAND_HEIGHT_M = 0.15  # grip site to the top of the hand coming down on a grasp
 

@@ -21,11 +21,12 @@ import numpy as np
 
 from pipeline.policies.scripted import articulated, drawer_room, insert
 from pipeline.policies.scripted.goal import PUT, Predicate
-from pipeline.policies.scripted.grasps import plan_grasp
+from pipeline.policies.scripted.grasps import leaning, plan_grasp
 from pipeline.policies.scripted.motion import Ctx, Plan
 from pipeline.policies.scripted.placement import destination
 from pipeline.policies.scripted.recovery import checks
 from pipeline.policies.scripted.recovery.back_out import back_out, let_go
+from pipeline.policies.scripted.recovery.low_drawer import hook_low_drawer, low_handle
 from pipeline.policies.scripted.recovery.operate import operate_once
 from pipeline.policies.scripted.recovery.pick_place import pick_place_once
 from pipeline.policies.scripted.recovery.put_aside import put_aside
@@ -253,11 +254,14 @@ def shut_drawer_above(r: Round, region: str) -> Plan:
 
 
 def proud_in_drawer(r: Round) -> tuple[str, str] | None:
-    """After a failed push: an object sticking up out of the drawer jams it."""
+    """An object sticking up out of the drawer jams it: after a failed push, or at once where
+    it leans or sits on a wall (a bowl standing on the floor rises over the walls too, but
+    the cabinet's opening is taller: it closes)."""
     s, sub = r.ctx.scene, r.sub
-    if not (sub[0] == Predicate.CLOSE and r.tries[sub] > 0 and (joint := articulated.part_joint(s.env, sub[1])) is not None):
+    if not (sub[0] == Predicate.CLOSE and (joint := articulated.part_joint(s.env, sub[1])) is not None):
         return None
-    proud = [o for o in checks.proud_in_drawer(s, joint) if r.aside[o] < MAX_ASIDE]
+    proud = [o for o in checks.proud_in_drawer(s, joint) if r.aside[o] < MAX_ASIDE
+             and (r.tries[sub] > 0 or leaning(s, o) or checks.perched_in_drawer(s, joint, o))]
     if proud:
         debug("re-place before closing", proud)
     return (proud[0], joint) if proud else None
@@ -273,11 +277,17 @@ def re_place(r: Round, how: tuple[str, str]) -> Plan:
     if abs(fr.qpos) < OPEN_FULL * float(np.max(np.abs(fr.range))):
         # the part of it under the cabinet cannot be reached from above: pull it out
         debug("open fully first", joint)
-        yield from articulated.pull_drawer(r.ctx, joint)
+        if low_handle(r.ctx, joint):  # the tilted grip meets the table short of a low bar
+            yield from hook_low_drawer(r.ctx, joint)
+        else:
+            yield from articulated.pull_drawer(r.ctx, joint)
         return
-    if again is not None:
+    if again is not None and not leaning(s, o):
         yield from pick_place_once(r.ctx, again, r.aside[o])
     else:
+        # a leaning object held by its rim comes down leaning again (a bowl re-placed in the
+        # bottom drawer leaned 51 degrees on its front wall, the drawer jammed four times):
+        # set down on the table it stands, and the planner puts it in again from there
         yield from put_aside(r.ctx, o, r.aside[o] - 1)
 
 
