@@ -627,16 +627,3 @@ def test_a_bowl_perched_on_the_bottom_drawers_wall_is_put_in_again_before_the_fi
                          173332742, 159, init=3)
     assert out.success and out.steps <= 330, out
 
-
-@pytest.mark.sim
-def test_a_bowl_in_the_open_top_drawer_is_grasped_by_a_rim_side_clear_of_the_cabinet(tmp_path):
-    """A tuning scene (tunewide: libero_spatial, the bowl in the wooden cabinet's top drawer
-    onto the plate, init state 4, step 151): the bowl stands in the drawer against its back.
-    The rim side with the least wrist turn put the outer finger within 1.8 cm of the
-    cabinet's board; the hand drifts 1-2 cm on the way down and three grasps stopped on it
-    (in the air 3.5 cm over the rim), the fourth held: done at step 709. A side whose hand
-    passes that near a fixture now loses to a clear one: on the plate at step ~350."""
-    out = tune26_attempt(tmp_path, "libero_spatial",
-                         "pick_up_the_black_bowl_in_the_top_drawer_of_the_wooden_cabinet_and_place_it_on_the_plate",
-                         989904400, 151, init=4)
-    assert out.success and out.steps <= 420, out

@@ -22,7 +22,6 @@ from pipeline.policies.scripted.scene import TABLE_MARGIN, Scene
 MAX_SPAN = 0.068  # widest object (along the closing axis) grasped whole
 RIM_INSET = 0.012  # grasp point inside the outer rim edge
 RIM_DEPTH = 0.02  # grip site below the rim top
-NEAR_M = 0.018  # a rim grasp's hand probed this far around for near misses (a soft penalty)
 LONG_M = 0.12  # horizontal length beyond which a whole-object grasp goes to the centre of mass
 TALL_M = 0.11  # objects taller than this may be carried by a handle
 HANDLE_THIN_M, HANDLE_OUT_M = 0.016, 0.055  # a handle part: thinner than this, this far out
@@ -46,11 +45,10 @@ def is_upright_slab(scene: Scene, obj: str) -> bool:
     return thin < SLAB_THIN_M and long > SLAB_RATIO * thin and scene.box(obj).size[2] > SLAB_TALL_M
 
 
-def blocked_depth(scene: Scene, pos: np.ndarray, yaw: float, top: float, skip_tips: bool = False,
-                  jitter: float = 0.008) -> float:
+def blocked_depth(scene: Scene, pos: np.ndarray, yaw: float, top: float, skip_tips: bool = False) -> float:
     """How far (m) anything sticks up into the hand's way when the grip site is at `pos`:
     under both fingertips (unless `skip_tips`) and under the palm's ends (about 6 cm above
-    the tips), each probed at `jitter` around."""
+    the tips)."""
     ax = closing_axis(yaw)
     side = np.array([-ax[1], ax[0], 0.0])
     tip_z = pos[2] - 0.012
@@ -61,7 +59,7 @@ def blocked_depth(scene: Scene, pos: np.ndarray, yaw: float, top: float, skip_ti
     ]
     worst = 0.0
     for point, z in probes:
-        for dx, dy in ((0, 0), (jitter, 0), (-jitter, 0), (0, jitter), (0, -jitter)):
+        for dx, dy in ((0, 0), (0.008, 0), (-0.008, 0), (0, 0.008), (0, -0.008)):
             # start well above everything: a ray starting inside a geom would not see it
             hit = scene.env.ray_down(point[:2] + [dx, dy], max(top, z) + 0.4, z)
             if hit is not None:
@@ -213,12 +211,8 @@ def rim_grasp(scene: Scene, obj: str, dest: np.ndarray | None, choice: int) -> G
             there[:2] += dest[:2]
             there[2] = p[2] - box.lo[2] + dest[2] + 0.015
             block += blocked_depth(scene, there, yaw, there[2])
-        # a side whose hand passes within NEAR_M of a fixture's edge loses to a clear one:
-        # the hand drifts 1-2 cm on the way down (measured: three rim grasps beside the
-        # wooden cabinet's top board, chosen for the least wrist turn, landed on it)
-        near = blocked_depth(scene, p, yaw, box.hi[2], jitter=NEAR_M) if not block else 0.0
         # at the edge of the workspace the near rim keeps the elbow bent (see reach.py)
-        score = block * 10 + near + 0.01 * abs(yaw) + 10 * overreach(scene.env, p)
+        score = block * 10 + 0.01 * abs(yaw) + 10 * overreach(scene.env, p)
         ranked.append((score, len(ranked), Grasp(pos=p, yaw=float(yaw), rim=True)))
     ranked.sort(key=lambda r: r[:2])
     return ranked[choice % len(ranked)][2]
