@@ -655,3 +655,21 @@ def test_the_fist_that_pushes_a_door_shut_closes_on_the_way_there():
         assert articulated.is_closed_enough(env, "microwave_1")
         assert seen[0][0] != "make_fist" and "make_fist" not in dict(seen), seen
         assert dict(seen)["face_door"] is False, seen  # the fingers already shut there
+
+
+@pytest.mark.sim
+@pytest.mark.parametrize("suite, task, seed, step, init, steps", [
+    # the bowl to stack onto, tipped onto its neighbour: leaning 40 degrees
+    ("libero_90", "KITCHEN_SCENE2_stack_the_middle_black_bowl_on_the_back_black_bowl", 1571136195, 111, 4, 230),
+    # the red mug knocked onto the white mug: leaning 57 degrees on it
+    ("libero_90", "LIVING_ROOM_SCENE5_put_the_red_mug_on_the_right_plate", 1863214217, 110, 3, 360),
+])
+def test_version_13_grasps_a_leaning_object_where_its_wall_stands_vertical(tmp_path, suite, task, seed, step, init, steps):
+    """Two tuning scenes version 12 left uncertified (tunewide, tunetime; both
+    `retries_exhausted` after four tries): an object leaning on a neighbour, grasped by its
+    rim under the box top, which over a tilted rim is air on the low side and the wall's
+    upward-facing outside on the high side. By the rim a quarter turn round from its highest
+    point, where the wall stands vertical (`grasps.side_rim`), the task is done at steps
+    ~180 and ~300."""
+    out = tune26_attempt(tmp_path, suite, task, seed, step, init=init)
+    assert out.success and out.steps <= steps, out

@@ -178,7 +178,8 @@ def side_rim(scene: Scene, obj: str, side: int) -> Grasp:
     rim[2] -= RIM_DEPTH
     out = rot[:2, :2] @ across
     theta = float(np.arctan2(out[1], out[0]))
-    return Grasp(pos=rim, yaw=float(theta % np.pi - np.pi / 2), rim=True)  # closing across the wall, as rim_grasp
+    # the fingers close across the wall (along `out`), as rim_grasp's do
+    return Grasp(pos=rim, yaw=float(theta % np.pi - np.pi / 2), rim=True)
 
 
 def rim_grasp(scene: Scene, obj: str, dest: np.ndarray | None, choice: int) -> Grasp:
