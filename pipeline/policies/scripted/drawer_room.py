@@ -18,6 +18,7 @@ from pipeline.policies.scripted.articulated import (FINGER_HALF, fist_yaw, front
 from pipeline.policies.scripted.motion import Ctx, Plan, travel
 from pipeline.policies.scripted.notes import Outcome
 from pipeline.policies.scripted.placement import place_room
+from pipeline.policies.scripted.primitives import Grip
 from pipeline.sim.facts import JointKind
 
 END_M = 0.005  # a slide this close to the end of its range counts as fully out
@@ -95,7 +96,11 @@ def drag_out(ctx: Ctx, joint: str) -> Plan:
     # libero_90 KITCHEN_SCENE1, a timeout)
     yaw = fist_yaw(ctx, np.pi / 2 if k == 1 else 0.0)
     ctx.yaw_hold = yaw
-    # the fist closes on the way (travel commands the gripper shut), as articulated's pushes
+    # the fist is made before setting off (not on the way, as articulated's pushes): the
+    # travel here can be 8 steps, the fingers still open when they went into the drawer
+    # (measured: tunebooks, the bottom drawer, three drags and a timeout)
+    if s.gripper_open():
+        yield Grip(1.0, ctx.close_steps, label="make_fist")
     hover = pos + [0, 0, 0.1]
     yield from travel(ctx, hover, yaw, 1.0, s.path_clearance(s.eef(), hover, 0.06, set()) + 0.07)
     yield ctx.move(pos, gripper=1.0, speed=0.6, yaw=yaw, tol=0.01, max_steps=50, label="into_drawer")

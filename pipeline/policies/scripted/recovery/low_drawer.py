@@ -11,6 +11,7 @@ import numpy as np
 
 from pipeline.policies.scripted import articulated
 from pipeline.policies.scripted.motion import Ctx, Plan, travel
+from pipeline.policies.scripted.primitives import Grip
 from pipeline.sim.facts import JointKind
 
 LOW_HANDLE_M = 0.06  # a handle bar this close over the table leaves no room for the tilted grip
@@ -52,7 +53,8 @@ def hook_low_drawer(ctx: Ctx, joint: str) -> Plan:
     yaw = np.pi / 2 if k == 1 else 0.0  # closing axis along the bar
     point = articulated.fist_into(pull, HOOK_PITCH)
     ctx.yaw_hold = yaw
-    # the fist closes on the way (travel commands the gripper shut), as articulated's pushes
+    if s.gripper_open():
+        yield Grip(1.0, ctx.close_steps, label="make_fist")
     site = pos - point * TIP_M
     # pitch well out in front, then come in between this bar and the one above, then down
     hover = site + pull * 0.06 + [0, 0, 0.07]
