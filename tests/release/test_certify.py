@@ -29,7 +29,8 @@ def test_a_scene_the_recovery_expert_recovers_is_certified_and_its_marker_is_the
     [marker] = (run / "release" / "_build" / "certificates" / "_done").iterdir()
     info = json.loads(marker.read_text())
     assert marker.name == f"{row.suite}__{row.task}__{row.episode_id}__step_{row.step:04d}.done"
-    assert info["inputs"] == {"scene": f"{row.bddl_sha256[:16]}-{row.state_sha256[:16]}", "expert": "recovery12",
+    assert info["inputs"] == {"scene": f"{row.bddl_sha256[:16]}-{row.state_sha256[:16]}",
+                              "expert": f"recovery{certify.EXPERT_VERSION['recovery']}",
                               "tries": 2, "horizon": 300, "chunk": 8}
     # a rebuild reads the marker instead of running the expert again ...
     monkeypatch.setattr(certify, "certify_one", lambda *a, **k: pytest.fail("certificate was recomputed"))
