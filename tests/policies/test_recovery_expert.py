@@ -618,15 +618,14 @@ def test_a_bottle_lying_beside_the_base_is_grasped_with_the_hand_pitched_toward_
 def test_a_bowl_perched_on_the_bottom_drawers_wall_is_put_in_again_before_the_first_push(tmp_path):
     """A tuning scene (tunewide: libero_10 KITCHEN_SCENE4, init state 3, step 159): the bowl
     dropped into the open bottom drawer sits half on its side wall, 6.6 cm over the floor.
-    Version 12 pushed the drawer twice, tipping the bowl to lean 46 degrees; its rim grasps,
-    aimed under the box top at the rim's high point, came down on the outside of the wall
-    and missed twice; four more pushes and `retries_exhausted` at step 862. Now the perched
-    bowl is taken out before any push, by its rim where the wall stands vertical, and put in
-    again from the table: closed at step ~290."""
+    Version 12 pushed the drawer twice, tipping the bowl to lean 46 degrees; its level rim
+    grasps (2 cm under the box top: air over the tilted rim's low side) missed twice; four
+    more pushes and `retries_exhausted` at step 902 (a timeout at the release's 520). Now the
+    perched bowl is taken out before any push, by its rim where the wall stands vertical, and
+    put in again from the table: closed at step ~290."""
     out = tune26_attempt(tmp_path, "libero_10", "KITCHEN_SCENE4_put_the_black_bowl_in_the_bottom_drawer_of_the_cabinet_and_close_it",
                          173332742, 159, init=3)
     assert out.success and out.steps <= 330, out
-
 
 
 def test_the_fist_that_pushes_a_door_shut_closes_on_the_way_there():
