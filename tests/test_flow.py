@@ -51,9 +51,11 @@ def _review_everything(cfg_path: Path) -> int:
 def test_recover_run_stops_at_review_goes_on_after_it_and_then_has_nothing_to_do(tmp_path):
     smoke = yaml.safe_load((REPO / "configs" / "smoke.yaml").read_text())
     smoke["run"]["output_dir"] = str(tmp_path / "run")
-    # the smoke run, with one demo per scene and small LeRobot frames: the test is about the walk
+    # the smoke run, with one demo per scene and small LeRobot frames: the test is about the walk.
+    # Every scene on the train side, so there are demos to record however few scenes the
+    # generator leaves (its two scenes of version 5 both drew the eval side: no demos step ran)
     smoke["release"] = {"recovery_demos": 1, "recovery_demo_tries": 2, "lerobot_image_size": 64,
-                        "lerobot_render_quality": "fast"}
+                        "lerobot_render_quality": "fast", "split": {"train_share": 1.0}}
     cfg = tmp_path / "smoke.yaml"
     cfg.write_text(yaml.safe_dump(smoke))
     run = tmp_path / "run"
