@@ -62,13 +62,14 @@ def _episode(stage1: Path, rec: EpisodeRecord, evidence=None) -> Episode:
 
 
 def _stub_localization(rec: EpisodeRecord, step: int, time_s: float, source: str, phases: Phases | None = None,
-                       events=()) -> Localization:
-    """A Localization at the localizer's own onset (no scene is written: only the characterizer reads it)."""
+                       events=(), scene_step: int | None = None) -> Localization:
+    """A Localization at the localizer's own onset (no scene is written: only the characterizer reads it,
+    with the step stage 2 would snapshot, `scene_step`; the onset when not known)."""
     phases = phases or Phases(pre=(0, step), during=(step, min(step + 1, rec.steps + 1)),
                               post=(min(step + 1, rec.steps + 1), rec.steps + 1))
     return Localization(key=rec.key, suite=rec.suite, task=rec.task, episode_id=rec.episode_id,
                         instruction=rec.instruction, source=source, fail_step=step, fail_time_s=time_s,
-                        phases=phases, scene_bddl="", scene_state="", events=list(events))
+                        phases=phases, scene_step=scene_step, scene_bddl="", scene_state="", events=list(events))
 
 
 def _characterize(characterizer: Characterizer, out: dict[str, Prediction], locs: list[Localization]) -> None:
@@ -193,7 +194,7 @@ class BenchStage(Stage[EpisodeRecord]):
         from pipeline.evidence import compute_evidence, read_evidence
         from pipeline.sim import get_task
         from pipeline.stage2.layout import load_episode
-        from pipeline.stage2.phases import split_phases
+        from pipeline.stage2.phases import settled_step, split_phases
 
         layout, tools = RunLayout.of(self.cfg), self.labelers(ctx)
         stored = layout.stage2.abs(layout.stage2.evidence(rec))
@@ -212,7 +213,8 @@ class BenchStage(Stage[EpisodeRecord]):
         step = min(onset.fail_step, len(ev) - 1)
         s2 = self.cfg.stage2
         loc = _stub_localization(rec, step, step / rec.control_hz, tools.localizer.name,
-                                 split_phases(ev, step, s2.settle_speed_mps, s2.settle_steps), onset.events)
+                                 split_phases(ev, step, s2.settle_speed_mps, s2.settle_steps), onset.events,
+                                 settled_step(ev, step, s2.settle_speed_mps, s2.settle_steps))
         out = {rec.key: Prediction(rec.key, step)}
         tools.evidence[rec.key] = ev
         try:

@@ -6,10 +6,12 @@ Output: `pipeline.records.Characterization` with source "simstate" (raw_text hol
 measurements the decision used, for reviewers).
 
 What the failure did is measured between the onset state and the end of the during-failure
-phase (the scene once stable again), but at least MIN_EFFECT_STEPS past the onset, and while
-the robot still touches the onset event's object, until it lets go (at most
-TOUCH_MAX_STEPS, then LET_GO_STEPS), per object: how far it moved, its tilt, whether the
-robot still holds it.
+phase (the scene stable again, or the robot's attempt over), but at least MIN_EFFECT_STEPS
+past the onset, while the robot still touches the onset event's object until it lets go (at
+most TOUCH_MAX_STEPS, then LET_GO_STEPS), and never before the released scene (the
+Localization's `scene_step`, the first settled state at or after the onset: the level is
+the recovery that scene needs), per object: how far it moved, its tilt, whether the robot
+still holds it.
 
 Level (first rule that matches):
 - L4  a non-target object (or a fixture) now obstructs: it moved >= MOVED_M or toppled during
@@ -165,6 +167,9 @@ def characterize(loc: Localization, ev: Evidence) -> Characterization:
     event = _onset_event(loc)
     end = min(max(loc.phases.during[1] - 1, onset + MIN_EFFECT_STEPS), len(ev) - 1)
     end = max(end, _let_go(ev, event, onset))
+    # an object still falling or sliding 2 s on ends where the released scene shows it
+    # (tuning runs: 4 knocks called L2 whose scene shows the truth's L3 / L4; none lost)
+    end = min(max(end, loc.scene_step), len(ev) - 1)
     ch = _changes(ev, onset, end)
     level, obstacle = _level(ev, ch, end)
     category = _category(ev, event, ev.fixtures)

@@ -180,3 +180,20 @@ def test_a_target_the_fingers_still_press_is_measured_once_they_let_go():
     for t in range(ONSET, n):
         ev.contacts[t] = ["bowl_1|robot"]
     assert json.loads(characterize(loc, ev).raw_text)["end_step"] == ONSET + 80  # at most 4 s on
+
+
+def test_a_target_still_sliding_two_seconds_on_is_measured_at_the_released_scene():
+    # tune26 / tunetime: knocked objects still moving 2 s after the onset, called L2 while the
+    # scene stage 2 releases (the first settled state) shows the truth's L3 / L4
+    n = 120
+    ev = make_evidence(n=n)
+    _place(ev, "bowl_1", (0.03, 0.0, 0.0))  # 3 cm by the end of the 2 s window ...
+    _place(ev, "bowl_1", (0.08, 0.0, 0.0), from_step=75)  # ... 8 cm once it came to rest
+    base = dict(key="s/t/e", suite="s", task="t", episode_id="e", instruction="put the bowl on the plate",
+                source="simstate", fail_time_s=ONSET / 20, fail_step=ONSET, scene_bddl="", scene_state="",
+                phases=Phases(pre=(0, ONSET), during=(ONSET, END), post=(END, n)),
+                events=[_event("unintended_displacement")])
+    assert characterize(Localization(**base), ev).recovery_level == Level.L2  # no scene: the onset
+    assert characterize(Localization(**base, scene_step=ONSET + 5), ev).recovery_level == Level.L2  # never shorter
+    c = characterize(Localization(**base, scene_step=80), ev)
+    assert c.recovery_level == Level.L3 and json.loads(c.raw_text)["end_step"] == 80
