@@ -197,3 +197,18 @@ def test_a_target_still_sliding_two_seconds_on_is_measured_at_the_released_scene
     assert characterize(Localization(**base, scene_step=ONSET + 5), ev).recovery_level == Level.L2  # never shorter
     c = characterize(Localization(**base, scene_step=80), ev)
     assert c.recovery_level == Level.L3 and json.loads(c.raw_text)["end_step"] == 80
+
+
+def test_a_dropped_target_is_measured_before_the_robots_next_attempt_picks_it_up():
+    # tuning runs (tunewide, tunel3, tunemug): a drop lying at rest in the released scene,
+    # grasped again by the generator's next attempt 1.5-2 s after the onset, read as still held
+    n = 120
+    ev = make_evidence(n=n)
+    _place(ev, "bowl_1", (0.08, 0.0, 0.0))  # fell 8 cm off and lies there: L3
+    ev.grasped[ONSET + 32:] = ["bowl_1"] * (n - ONSET - 32)  # the next attempt has it again
+    base = dict(key="s/t/e", suite="s", task="t", episode_id="e", instruction="put the bowl on the plate",
+                source="simstate", fail_time_s=ONSET / 20, fail_step=ONSET, scene_bddl="", scene_state="",
+                phases=Phases(pre=(0, ONSET), during=(ONSET, ONSET + 15), post=(ONSET + 15, n)),
+                events=[_event("object_dropped")])
+    c = characterize(Localization(**base, scene_step=ONSET + 15), ev)
+    assert c.recovery_level == Level.L3 and json.loads(c.raw_text)["end_step"] < ONSET + 32
