@@ -103,6 +103,22 @@ def held(scene: Scene) -> str | None:
     return obj if obj in left | right else None
 
 
+# closed fingers that touch nothing open on the way to a grasp at least this far off (the
+# ramp to open takes ~8 steps, a travel this long ~20; a shorter one left them half shut over
+# the object: tunewide's bowl stack, four missed grasps)
+OPEN_ON_THE_WAY_M = 0.15
+
+
+def opens_on_the_way(scene: Scene, obj: str | None) -> bool:
+    """The gripper, closed on nothing and touching nothing, will be open before the hand
+    gets to `obj` (its box centre at least OPEN_ON_THE_WAY_M off, horizontally): the next
+    approach commands it open (a separate opening and back-off cost ~17 steps)."""
+    left, right = scene.env.finger_contacts()
+    if left or right or held(scene) is not None or obj is None or obj not in scene.things():
+        return False
+    return float(np.linalg.norm(scene.box(obj).centre[:2] - scene.eef()[:2])) >= OPEN_ON_THE_WAY_M
+
+
 def elbow_straight(scene: Scene) -> bool:
     return _elbow_slack(scene) < ELBOW_STRAIGHT
 

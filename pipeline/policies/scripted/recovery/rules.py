@@ -119,15 +119,12 @@ def unwind_arm(r: Round, _: bool) -> Plan:
 
 
 def closed_on_nothing(r: Round) -> bool | None:
-    """The closed fingers hold nothing but touch something. Touching nothing (the fist after
-    a drag out, a grasp closed on air), they open on the way of whatever comes next: every
-    move but a fist's commands them open (the separate opening and back-off cost ~17 steps;
-    measured: libero_goal's bowl put into the drawer the fist dragged out, 545 -> 528)."""
+    """The closed fingers hold nothing, and will not open on the way to the subgoal's
+    object (`checks.opens_on_the_way`)."""
     s = r.ctx.scene
-    if r.held is not None or s.gripper_open():
+    if r.held is not None or s.gripper_open() or checks.opens_on_the_way(s, r.sub[1]):
         return None
-    left, right = s.env.finger_contacts()
-    return True if left or right else None
+    return True
 
 
 def open_hand(r: Round, _: bool) -> Plan:
