@@ -678,9 +678,9 @@ def test_version_13_grasps_a_leaning_object_where_its_wall_stands_vertical(tmp_p
 def test_version_16_drags_the_drawer_pushed_back_out_with_the_fist_and_opens_the_hand_on_the_way(tmp_path):
     """tunewide, libero_goal "open the top drawer and put the bowl inside", step 369: the
     bowl under the open drawer's front. The drawer pushed back to 4.3 cm out was pulled out
-    again by its handle (tilt, reach, pull, untilt), and the fist that dragged it opened and
-    backed off on its own before the bowl's grasp: the bowl went in at step 545 (version 14,
-    a timeout). Dragged out by the fist, whose fingers open on the way to the bowl 0.3 m
-    off (`checks.opens_on_the_way`): step ~516, inside the release's horizon (520)."""
+    again by its handle (tilt, reach, pull, untilt): the bowl went in at step 545 (version
+    14, a timeout). Dragged out by the fist (step 528), whose fingers then open on the way
+    to the bowl instead of opening and backing off first (`checks.opens_on_the_way`): step
+    ~516, inside the release's horizon (520)."""
     out = tune26_attempt(tmp_path, "libero_goal", "open_the_top_drawer_and_put_the_bowl_inside", 52122322, 369)
     assert out.success, out
