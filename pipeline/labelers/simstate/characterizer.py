@@ -169,7 +169,7 @@ def characterize(loc: Localization, ev: Evidence) -> Characterization:
     event = _onset_event(loc)
     end = min(max(loc.phases.during[1] - 1, onset + MIN_EFFECT_STEPS), len(ev) - 1)
     end = max(end, _let_go(ev, event, onset))
-    # an object still falling or sliding 2 s on ends where the released scene shows it
+    # an object still falling or sliding 1.5 s on ends where the released scene shows it
     # (tuning runs: 4 knocks called L2 whose scene shows the truth's L3 / L4; none lost)
     end = min(max(end, loc.scene_step), len(ev) - 1)
     ch = _changes(ev, onset, end)

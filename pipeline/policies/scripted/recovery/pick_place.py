@@ -122,7 +122,7 @@ def book_slot(ctx: Ctx, obj: str, target: str) -> float | None:
     return None if size is None else slot_alignment(ctx, obj, target, size=size)
 
 
-def open_hand(ctx: Ctx, obj: str) -> Plan:
+def free_hand_for(ctx: Ctx, obj: str) -> Plan:
     """`free_hand`, unless the fingers open on the way to `obj` (`checks.opens_on_the_way`:
     the fist after a drag out, far from what it picks next)."""
     if not checks.opens_on_the_way(ctx.scene, obj):
@@ -148,10 +148,10 @@ def pick_place_once(ctx: Ctx, conjunct: tuple[str, ...], attempt: int) -> Plan:
         if book is not None:
             yield from stand_up(ctx, obj, book)
         elif by_handle:
-            yield from open_hand(ctx, obj)
+            yield from free_hand_for(ctx, obj)
             yield from grasp_by_handle(ctx, obj, handle, hover_m=0.08 + 0.03 * min(attempt, 2))
         else:
-            yield from open_hand(ctx, obj)
+            yield from free_hand_for(ctx, obj)
             dest = destination(ctx.scene, obj, target)
             # a candidate whose fingers (and palm) land clear of other objects (they would be
             # clamped too); none: push the object clear of its neighbour first (nudge.py)
