@@ -628,6 +628,7 @@ def test_a_bowl_perched_on_the_bottom_drawers_wall_is_put_in_again_before_the_fi
     assert out.success and out.steps <= 330, out
 
 
+@pytest.mark.sim
 def test_the_fist_that_pushes_a_door_shut_closes_on_the_way_there():
     """The microwave's door (libero_10 KITCHEN_SCENE6, init state 0: the door open, the hand
     open) pushed shut by a fist (`articulated.close_part`, both experts): the hand sets off at

@@ -167,11 +167,10 @@ def _category(ev: Evidence, event: SimEvent | None, fixtures: list[str]) -> Cate
 def characterize(loc: Localization, ev: Evidence) -> Characterization:
     onset = min(loc.fail_step, len(ev) - 1)
     event = _onset_event(loc)
-    end = min(max(loc.phases.during[1] - 1, onset + MIN_EFFECT_STEPS), len(ev) - 1)
-    end = max(end, _let_go(ev, event, onset))
-    # an object still falling or sliding 1.5 s on ends where the released scene shows it
-    # (tuning runs: 4 knocks called L2 whose scene shows the truth's L3 / L4; none lost)
-    end = min(max(end, loc.scene_step), len(ev) - 1)
+    # never before the released scene: an object still falling or sliding 1.5 s on ends where
+    # the scene shows it (tuning runs: 4 knocks called L2 whose scene shows the truth's L3 / L4)
+    end = min(max(loc.phases.during[1] - 1, onset + MIN_EFFECT_STEPS, _let_go(ev, event, onset), loc.scene_step),
+              len(ev) - 1)
     ch = _changes(ev, onset, end)
     level, obstacle = _level(ev, ch, end)
     category = _category(ev, event, ev.fixtures)

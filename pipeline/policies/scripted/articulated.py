@@ -250,8 +250,7 @@ def _push_low_drawer(ctx: Ctx, joint: str) -> Plan:
     yaw = fist_yaw(ctx, np.pi / 2 if k == 1 else 0.0)  # the palm's long side across the push
     point = fist_into(pull, PUSH_PITCH)
     ctx.yaw_hold = yaw
-    # the fist closes on the way (travel's moves command the gripper shut), not before it:
-    # close_steps sooner, and the fingers are shut long before the face
+    # the fist closes on the way, as _push_drawer's
     hover = pos + [0, 0, 0.08]
     yield from travel(ctx, hover, yaw, 1.0, s.path_clearance(s.eef(), hover, 0.06, set()) + 0.07)
     ctx.approach_hold = point
@@ -290,8 +289,7 @@ def _swing_door(ctx: Ctx, joint: str, opening: bool) -> Plan:
     tangent = spin * np.array([-direction[1], direction[0]])
     lever = anchor[:2] + direction * 0.75 * r_far
     start = np.array([*(lever - tangent * 0.06), z])
-    # the fist closes on the way (travel's moves command the gripper shut), not before it:
-    # close_steps sooner, and the fingers are shut long before the face
+    # the fist closes on the way, as _push_drawer's
     hover = start + [0, 0, 0.1]
     yield from travel(ctx, hover, 0.0, 1.0, s.path_clearance(s.eef(), hover, 0.06, set()) + 0.07)
     yield ctx.move(start, gripper=1.0, speed=0.6, tol=0.012, max_steps=50, label="face_door")

@@ -113,8 +113,8 @@ def opens_on_the_way(scene: Scene, obj: str | None) -> bool:
     """The gripper, closed on nothing and touching nothing, will be open before the hand
     gets to `obj` (its box centre at least OPEN_ON_THE_WAY_M off, horizontally): the next
     approach commands it open (a separate opening and back-off cost ~17 steps)."""
-    left, right = scene.env.finger_contacts()
-    if left or right or held(scene) is not None or obj is None or obj not in scene.things():
+    left, right = scene.env.finger_contacts()  # (a held object is touched: `held`)
+    if left or right or obj is None or obj not in scene.things():
         return False
     return float(np.linalg.norm(scene.box(obj).centre[:2] - scene.eef()[:2])) >= OPEN_ON_THE_WAY_M
 
