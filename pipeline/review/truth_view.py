@@ -21,11 +21,12 @@ from pipeline.truth.derive import EpisodeTruth, TruthError, episode_truth
 
 def truth_for(run_dir: str | Path, key: str, control_hz: int = 20) -> EpisodeTruth | None:
     """The episode's truth, or None (no truth file, no failed attempt, an unusable record)."""
-    path = RunLayout(Path(run_dir)).stage1.episode_of_key(key).truth
+    layout = RunLayout(Path(run_dir))
+    path = layout.stage1.episode_of_key(key).truth
     if not path.is_file():
         return None
     try:
-        return episode_truth(path, key, control_hz)
+        return episode_truth(path, key, control_hz, layout.stage2.evidence_of_key(key))
     except TruthError:
         return None
 

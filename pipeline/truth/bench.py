@@ -44,9 +44,13 @@ LOCALIZERS = ("simstate", "openai", "transformers")
 WORST = 10
 
 
-def load_truths(run_dir: Path) -> tuple[list[EpisodeRecord], dict[str, EpisodeTruth], dict[str, str]]:
-    """Failed episodes, their truths, and key -> reason for those set aside."""
-    stage1 = RunLayout(run_dir).stage1
+def load_truths(run_dir: Path, settle: tuple[float, int] = (0.01, 10)
+                ) -> tuple[list[EpisodeRecord], dict[str, EpisodeTruth], dict[str, str]]:
+    """Failed episodes, their truths, and key -> reason for those set aside. A truth's level
+    reaches the settled scene where stage 2's evidence file is there (`derive`; `settle`:
+    stage 2's speed and calm steps)."""
+    layout = RunLayout(run_dir)
+    stage1 = layout.stage1
     manifest = stage1.manifest
     if not manifest.is_file():
         raise FatalError(f"{manifest}: no stage 1 manifest; run `recover stage1` first")
@@ -54,7 +58,8 @@ def load_truths(run_dir: Path) -> tuple[list[EpisodeRecord], dict[str, EpisodeTr
     truths, aside = {}, {}
     for rec in failed:
         try:
-            truths[rec.key] = episode_truth(stage1.episode(rec).truth, rec.key, rec.control_hz)
+            truths[rec.key] = episode_truth(stage1.episode(rec).truth, rec.key, rec.control_hz,
+                                            layout.stage2.abs(layout.stage2.evidence(rec)), settle)
         except TruthError as e:
             aside[rec.key] = f"{e.reason}: {e}"
     return failed, truths, aside
@@ -120,7 +125,9 @@ def markdown(report: dict, localizer: str, run_dir: Path) -> str:
     pct = (lambda v: "-" if v is None else f"{v:.0%}")
     lines = [f"# bench-localize: {localizer} on {run_dir}", "",
              f"Failed episodes: {report['failed']}, with truth: {report['truths']} "
-             f"(set aside: {report['set_aside_reasons'] or 'none'}).", "",
+             f"(set aside: {report['set_aside_reasons'] or 'none'}); the truth's level read to: "
+             f"{report.get('truth_level_windows') or '-'} (scene: the settled state, attempt: the generator's "
+             "attempt end).", "",
              "| figure | value |", "|---|---|",
              f"| localized | {report['localized']} of {report['truths']} "
              f"(misses: {report['unlocalized_reasons'] or '-'}) |",
@@ -192,13 +199,14 @@ def run(cfg: Config, localizer: str = "simstate", out: Path | None = None) -> di
     if localizer not in LOCALIZERS:
         raise FatalError(f"--localizer {localizer!r}: choose one of {LOCALIZERS}")
     run_dir = Path(cfg.out)
-    failed, truths, aside = load_truths(run_dir)
+    failed, truths, aside = load_truths(run_dir, (cfg.stage2.settle_speed_mps, cfg.stage2.settle_steps))
     scored = [r for r in failed if r.key in truths]
     folder = out or RunLayout(run_dir).bench(localizer)
     preds = predict(cfg, localizer, scored, folder)
     hz = failed[0].control_hz if failed else 20
     report = {"localizer": localizer, "run": str(run_dir), "control_hz": hz, "failed": len(failed),
               "set_aside": len(aside), "set_aside_reasons": dict(Counter(v.split(":")[0] for v in aside.values())),
+              "truth_level_windows": dict(Counter(t.level_window for t in truths.values())),
               **score(truths, preds, hz), "set_aside_episodes": aside,
               "truth": {k: t.model_dump(mode="json") for k, t in truths.items()}}
     write_json(folder / "report.json", report)

@@ -37,7 +37,13 @@ Rules:
   (environmental_obstruction is never expected: the generator does not know when a
   fixture blocked it.)
 - Level: the taxonomy (annotations/README.md) applied to the privileged scene change from
-  the onset to the end of that attempt (`changes`), first rule that matches:
+  the onset to the scene the failure leaves: the end of that attempt (`changes`, the
+  generator's record), or, when stage 2's evidence shows the objects still moving then,
+  the first settled state at or after the onset (`stage2.phases.settled_step`, stage 2's
+  own rule for the scene it releases; the change measured on the evidence,
+  `scene_changes`). A mug still tipping over when the generator's attempt ended is an L3
+  scene, not an L2 one. Without evidence (no stage 2 yet) the attempt's end; the truth
+  says which (`level_window`). First rule that matches:
   L4 environmental recovery: an object that is neither a goal target nor a reference moved
      >= MOVED_M (or toppled) and ends within OBSTRUCT_M (xy) of a target or reference;
   L3 object state recovery: a goal target toppled (tilt >= TOPPLE_DEG), fell off the table,
@@ -57,8 +63,9 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
-from pipeline.evidence import goal_roles
+from pipeline.evidence import Evidence, goal_roles, read_evidence
 from pipeline.records import Category, Level, Record
+from pipeline.stage2.phases import settled_step
 
 MOVED_M, FAR_M, OBSTRUCT_M, PLACE_NEAR_M = 0.01, 0.05, 0.15, 0.10
 TRANSIT_PHASES = frozenset({"pick_lift", "lift", "transport"})  # carrying, not yet placing
@@ -78,6 +85,8 @@ class EpisodeTruth(Record):
     event: str
     event_object: str | None = None
     detail: str = ""
+    level_window: str = "attempt"  # "attempt" (the generator's record) or "scene" (evidence, to the settled state)
+    level_end_step: int | None = None  # the state the level's change was measured at
 
 
 class TruthError(ValueError):
@@ -157,8 +166,39 @@ def level_of(changes: list[dict], targets: list[str], references: list[str]) -> 
     return Level.L1
 
 
-def derive(key: str, rows: list[dict], meta: dict, control_hz: int = 20) -> EpisodeTruth:
-    """The truth of one failed episode from its attempt rows (TruthError when there is none)."""
+def scene_changes(ev: Evidence, onset: int, scene: int) -> list[dict]:
+    """The generator's `changes` (one per object, truth.TRUTH_SCHEMA's fields) measured on
+    the evidence from state `onset` to state `scene`: tilt against the first state, fell off
+    = 10 cm below where it started, held = in the hand at `scene`."""
+    out = []
+    for o in ev.objects:
+        pos, tilt = ev.col("position", o), ev.col("tilt_deg", o)
+        out.append({"object": o, "moved_m": float(np.linalg.norm(pos[scene] - pos[onset])),
+                    "tilt_deg": float(tilt[scene]), "tilt_gain_deg": float(tilt[scene] - tilt[onset]),
+                    "fell_off": bool(ev.col("lift", o)[scene] < -0.1), "held": ev.grasped[scene] == o,
+                    "position": [float(v) for v in pos[scene]]})
+    return out
+
+
+def _window(row: dict, step: int, ev: Evidence | None, settle: tuple[float, int]) -> tuple[list[dict], str, int]:
+    """The change the level is read from, its window's name and the state it ends at (rules above)."""
+    from pipeline.policies.scripted.truth import FALL_ROWS
+
+    recorded = int(row["end_step"]) if row.get("end_step") is not None else step
+    end = max(recorded, step + FALL_ROWS)  # the generator's own window (truth.rows)
+    if ev is not None:
+        end = min(end, len(ev) - 1)
+        scene = settled_step(ev, min(step, len(ev) - 1), *settle)
+        if scene is not None and scene > end:
+            return scene_changes(ev, step, scene), "scene", scene
+    return row["changes"] or [], "attempt", end
+
+
+def derive(key: str, rows: list[dict], meta: dict, control_hz: int = 20, evidence: Evidence | None = None,
+           settle: tuple[float, int] = (0.01, 10)) -> EpisodeTruth:
+    """The truth of one failed episode from its attempt rows (TruthError when there is none);
+    with the episode's `evidence` the level's window reaches the settled scene (`settle`:
+    stage 2's speed and calm steps)."""
     failed = [r for r in rows if r["outcome"] != "achieved"]
     if not failed:
         raise TruthError("no_failed_attempt", f"{key}: every recorded attempt achieved its subgoal")
@@ -172,14 +212,25 @@ def derive(key: str, rows: list[dict], meta: dict, control_hz: int = 20) -> Epis
     known = list(meta.get("objects", [])) + list(meta.get("fixtures", []))
     targets, refs = goal_roles(goal, known)
     step = int(row["event_step"])
+    changes, window, end = _window(row, step, evidence, settle)
     return EpisodeTruth(
         key=key, onset_step=step, onset_time_s=round(step / control_hz, 3),
-        category=category_of(row, targets).value, level=level_of(row["changes"] or [], targets, refs).value,
+        category=category_of(row, targets).value, level=level_of(changes, targets, refs).value,
         outcome=row["outcome"], attempt=int(row["attempt"]), skill=row["skill"], event=row["event"],
-        event_object=row.get("event_object"), detail=row.get("detail") or "",
+        event_object=row.get("event_object"), detail=row.get("detail") or "", level_window=window,
+        level_end_step=end,
     )
 
 
-def episode_truth(path: str | Path, key: str, control_hz: int = 20) -> EpisodeTruth:
+def episode_truth(path: str | Path, key: str, control_hz: int = 20, evidence_path: str | Path | None = None,
+                  settle: tuple[float, int] = (0.01, 10)) -> EpisodeTruth:
+    """The truth of the episode whose record is `path`; with stage 2's evidence file
+    (`evidence_path`, when it exists and reads) the level's window reaches the scene."""
     rows, meta = read_truth(path)
-    return derive(key, rows, meta, control_hz)
+    ev = None
+    if evidence_path is not None and Path(evidence_path).is_file():
+        try:
+            ev = read_evidence(evidence_path)
+        except (pa.ArrowException, OSError, ValueError, KeyError):  # unreadable: the attempt's window, said in level_window
+            ev = None
+    return derive(key, rows, meta, control_hz, ev, settle)

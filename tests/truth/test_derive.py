@@ -63,3 +63,40 @@ def test_episodes_without_a_mistake_to_localize_are_set_aside_with_a_reason(rows
     with pytest.raises(TruthError) as e:
         derive("k", rows, META)
     assert e.value.reason == reason
+
+
+def _tipping_mug(rows_n=120, tip_from=40, tip_to=70):
+    """Evidence of a mug (a goal target) tipping from 0 to 90 deg between two states, still
+    (speed 0) before and after, nothing else moving."""
+    import numpy as np
+
+    from pipeline.evidence import Evidence
+
+    t = np.arange(rows_n)
+    frac = np.clip((t - tip_from) / (tip_to - tip_from), 0, 1)
+    pos = np.stack([0.08 * frac, np.zeros(rows_n), 0.9 - 0.03 * frac], axis=1).astype(np.float32)
+    speed = np.where((t >= tip_from) & (t < tip_to), 0.1, 0.0).astype(np.float32)
+    cols = {"position": pos, "tilt_deg": (90 * frac).astype(np.float32), "lift": pos[:, 2] - 0.9,
+            "speed": speed}
+    still = {"position": np.tile([0.3, 0.0, 0.9], (rows_n, 1)).astype(np.float32), "tilt_deg": np.zeros(rows_n),
+             "lift": np.zeros(rows_n), "speed": np.zeros(rows_n)}
+    return Evidence(step=t, control_hz=20, gripper_opening=np.full(rows_n, 0.08), gripper_command=-np.ones(rows_n),
+                    grasped=[""] * rows_n, contacts=[[] for _ in t], goal_progress=np.zeros(rows_n),
+                    objects=["mug_1", "plate_1"], fixtures=["main_table"], goal=[["on", "mug_1", "plate_1"]],
+                    targets=["mug_1"], references=["plate_1"],
+                    per_object={c: {"mug_1": cols[c], "plate_1": still[c]} for c in cols})
+
+
+def test_the_level_is_read_at_the_settled_scene_when_the_target_still_moves_after_the_attempt():
+    """LIVING_ROOM_SCENE5's white mug (report10): 26 deg when the generator's attempt ended,
+    70 deg and 9 cm off at the scene stage 2 releases. The record says L2; the scene is L3."""
+    meta = {"objects": ["mug_1", "plate_1"], "fixtures": ["main_table"], "goal": [["on", "mug_1", "plate_1"]]}
+    r = row(0, "dropped", step=40, obj="mug_1", release=0.02, changes=[change("mug_1", 0.02, tilt=26, gain=26)])
+    r["target"], r["end_step"] = "mug_1", 50
+    ev = _tipping_mug()
+    t = derive("k", [r], meta, evidence=ev)
+    assert (t.level, t.level_window, t.level_end_step) == ("L3", "scene", 70)
+    assert derive("k", [r], meta).level == "L2"  # no evidence: the attempt's record, as before
+    ended_later = dict(r, end_step=90)  # the attempt itself lasted past the settled scene: its record stands
+    assert (derive("k", [ended_later], meta, evidence=ev).level_window,
+            derive("k", [ended_later], meta, evidence=ev).level) == ("attempt", "L2")
