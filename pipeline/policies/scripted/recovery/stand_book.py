@@ -70,6 +70,7 @@ LAG_TOL = np.radians(5.0)  # ... and on while it lags short of upright by more t
 STRAIGHTEN_TRIES = 2
 CORNER_DEPTH_M = 0.03  # grip site inside the corner along the hand's axis
 PUT_DOWN_GAP = 0.008  # book's lowest point above the table when it is let go
+LEVEL_TOL = 0.3  # radians: the hand this near pointing down after a turn (`back_out` calls 25 deg awkward)
 
 
 @dataclass(frozen=True)
@@ -228,7 +229,9 @@ def quarter_turn(ctx: Ctx, obj: str, ax: BookAxes, angle: float = 2 * PITCH, gra
         yield ctx.move(s.eef() - a2 * 0.04, yaw=yaw2, approach=a2, tol=0.015, max_steps=12, label="back_off")
     finally:
         ctx.approach_hold = None
-    yield ctx.move(s.eef() + [0.0, 0.0, 0.05], yaw=yaw2, tol=0.03, max_steps=15, label="retreat")
+    # rising, the hand turns back to pointing down: left tilted, the next attempt first sent it
+    # home across the table (`back_out`: an awkward arm) and back, ~60 steps per turn (measured)
+    yield ctx.move(s.eef() + [0.0, 0.0, 0.05], yaw=yaw2, tol=0.03, rot_tol=LEVEL_TOL, max_steps=30, label="retreat")
     if abs(yaw2) > np.pi / 2 + 0.3:
         # the hand was turned half about its axis (out of range the other way): turn it back
         # up here, or the next grasp turns the wrist on its way down and knocks the book over
