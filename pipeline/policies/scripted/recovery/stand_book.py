@@ -230,7 +230,8 @@ def quarter_turn(ctx: Ctx, obj: str, ax: BookAxes, angle: float = 2 * PITCH, gra
     finally:
         ctx.approach_hold = None
     # rising, the hand turns back to pointing down: left tilted, the next attempt first sent it
-    # home across the table (`back_out`: an awkward arm) and back, ~60 steps per turn (measured)
+    # home across the table (`back_out`: an awkward arm) and back (measured: 55 steps over an
+    # upside-down book's two turns)
     yield ctx.move(s.eef() + [0.0, 0.0, 0.05], yaw=yaw2, tol=0.03, rot_tol=LEVEL_TOL, max_steps=30, label="retreat")
     if abs(yaw2) > np.pi / 2 + 0.3:
         # the hand was turned half about its axis (out of range the other way): turn it back
