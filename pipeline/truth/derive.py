@@ -182,7 +182,7 @@ def scene_changes(ev: Evidence, onset: int, scene: int) -> list[dict]:
 
 def _window(row: dict, step: int, ev: Evidence | None, settle: tuple[float, int]) -> tuple[list[dict], str, int]:
     """The change the level is read from, its window's name and the state it ends at (rules above)."""
-    from pipeline.policies.scripted.truth import FALL_ROWS
+    from pipeline.policies.scripted.truth import FALL_ROWS  # here: the policies package loads the generator
 
     recorded = int(row["end_step"]) if row.get("end_step") is not None else step
     end = max(recorded, step + FALL_ROWS)  # the generator's own window (truth.rows)
@@ -231,6 +231,6 @@ def episode_truth(path: str | Path, key: str, control_hz: int = 20, evidence_pat
     if evidence_path is not None and Path(evidence_path).is_file():
         try:
             ev = read_evidence(evidence_path)
-        except (pa.ArrowException, OSError, ValueError, KeyError):  # unreadable: the attempt's window, said in level_window
-            ev = None
+        except (pa.ArrowException, OSError, ValueError, KeyError):
+            ev = None  # unreadable: the attempt's window, which `level_window` says
     return derive(key, rows, meta, control_hz, ev, settle)
