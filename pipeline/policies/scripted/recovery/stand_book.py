@@ -229,10 +229,14 @@ def quarter_turn(ctx: Ctx, obj: str, ax: BookAxes, angle: float = 2 * PITCH, gra
         yield ctx.move(s.eef() - a2 * 0.04, yaw=yaw2, approach=a2, tol=0.015, max_steps=12, label="back_off")
     finally:
         ctx.approach_hold = None
-    # rising, the hand turns back to pointing down: left tilted, the next attempt first sent it
-    # home across the table (`back_out`: an awkward arm) and back (measured: 55 steps over an
-    # upside-down book's two turns)
-    yield ctx.move(s.eef() + [0.0, 0.0, 0.05], yaw=yaw2, tol=0.03, rot_tol=LEVEL_TOL, max_steps=30, label="retreat")
+    # before another quarter (`upright` False: upside down, on a side) the hand turns back to
+    # pointing down while it rises: left tilted, the next attempt first sent it home across the
+    # table (`back_out`: an awkward arm) and back (measured: 55 steps over an upside-down book's
+    # two turns). After a turn that stands the book it gained nothing (the next grasp came at
+    # the same step) and a tuning book then jammed on the compartment's rim: as before there
+    level = not upright
+    yield ctx.move(s.eef() + [0.0, 0.0, 0.05], yaw=yaw2, tol=0.03, rot_tol=LEVEL_TOL if level else None,
+                   max_steps=30 if level else 15, label="retreat")
     if abs(yaw2) > np.pi / 2 + 0.3:
         # the hand was turned half about its axis (out of range the other way): turn it back
         # up here, or the next grasp turns the wrist on its way down and knocks the book over
