@@ -37,14 +37,14 @@ from pipeline.errors import FatalError
 from pipeline.layout import REPORT, RunLayout
 from pipeline.records import Category, EpisodeRecord, Level, read_episodes
 from pipeline.runner import Event
-from pipeline.truth.derive import EpisodeTruth, TruthError, episode_truth
+from pipeline.truth.derive import SETTLE, EpisodeTruth, TruthError, episode_truth, settle_of
 from pipeline.truth.predict import BenchStage, Prediction
 
 LOCALIZERS = ("simstate", "openai", "transformers")
 WORST = 10
 
 
-def load_truths(run_dir: Path, settle: tuple[float, int] = (0.01, 10)
+def load_truths(run_dir: Path, settle: tuple[float, int] = SETTLE
                 ) -> tuple[list[EpisodeRecord], dict[str, EpisodeTruth], dict[str, str]]:
     """Failed episodes, their truths, and key -> reason for those set aside. A truth's level
     reaches the settled scene where stage 2's evidence file is there (`derive`; `settle`:
@@ -199,7 +199,7 @@ def run(cfg: Config, localizer: str = "simstate", out: Path | None = None) -> di
     if localizer not in LOCALIZERS:
         raise FatalError(f"--localizer {localizer!r}: choose one of {LOCALIZERS}")
     run_dir = Path(cfg.out)
-    failed, truths, aside = load_truths(run_dir, (cfg.stage2.settle_speed_mps, cfg.stage2.settle_steps))
+    failed, truths, aside = load_truths(run_dir, settle_of(cfg.stage2))
     scored = [r for r in failed if r.key in truths]
     folder = out or RunLayout(run_dir).bench(localizer)
     preds = predict(cfg, localizer, scored, folder)

@@ -63,6 +63,7 @@ import numpy as np
 import pyarrow as pa
 import pyarrow.parquet as pq
 
+from pipeline.config import Stage2Config
 from pipeline.evidence import Evidence, goal_roles, read_evidence
 from pipeline.records import Category, Level, Record
 from pipeline.stage2.phases import settled_step
@@ -166,6 +167,14 @@ def level_of(changes: list[dict], targets: list[str], references: list[str]) -> 
     return Level.L1
 
 
+def settle_of(stage2: Stage2Config) -> tuple[float, int]:
+    """Stage 2's settle rule (speed, calm steps): the truth's scene window reads it too."""
+    return stage2.settle_speed_mps, stage2.settle_steps
+
+
+SETTLE = settle_of(Stage2Config())  # its defaults, where no run config is at hand (the review's truth view)
+
+
 def scene_changes(ev: Evidence, onset: int, scene: int) -> list[dict]:
     """The generator's `changes` (one per object, truth.TRUTH_SCHEMA's fields) measured on
     the evidence from state `onset` to state `scene`: tilt against the first state, fell off
@@ -195,7 +204,7 @@ def _window(row: dict, step: int, ev: Evidence | None, settle: tuple[float, int]
 
 
 def derive(key: str, rows: list[dict], meta: dict, control_hz: int = 20, evidence: Evidence | None = None,
-           settle: tuple[float, int] = (0.01, 10)) -> EpisodeTruth:
+           settle: tuple[float, int] = SETTLE) -> EpisodeTruth:
     """The truth of one failed episode from its attempt rows (TruthError when there is none);
     with the episode's `evidence` the level's window reaches the settled scene (`settle`:
     stage 2's speed and calm steps)."""
@@ -223,7 +232,7 @@ def derive(key: str, rows: list[dict], meta: dict, control_hz: int = 20, evidenc
 
 
 def episode_truth(path: str | Path, key: str, control_hz: int = 20, evidence_path: str | Path | None = None,
-                  settle: tuple[float, int] = (0.01, 10)) -> EpisodeTruth:
+                  settle: tuple[float, int] = SETTLE) -> EpisodeTruth:
     """The truth of the episode whose record is `path`; with stage 2's evidence file
     (`evidence_path`, when it exists and reads) the level's window reaches the scene."""
     rows, meta = read_truth(path)
