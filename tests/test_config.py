@@ -137,7 +137,8 @@ def test_config_remembers_its_file_for_later_errors(tmp_path):
 @pytest.mark.parametrize("name, inits", [
     ("report", [42, 43]), ("report2", [44, 45]), ("report3", [46, 47]), ("report4", [48, 49]),
     ("report5", [40, 41]), ("report6", [38, 39]), ("report7", [36, 37]), ("report8", [34, 35]),
-    ("report9", [32, 33]), ("report10", [30, 31]), ("report11", [28, 29]), ("report12", [26, 27])])
+    ("report9", [32, 33]), ("report10", [30, 31]), ("report11", [28, 29]), ("report12", [26, 27]),
+    ("report13", [24, 25])])
 def test_the_report_configs_are_the_default_on_init_states_nobody_tunes_on(name, inits):
     """`extends`: a report run states only what differs (README, "Tuning protocol"); each
     round reports on init states no earlier report used."""
