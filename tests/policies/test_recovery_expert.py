@@ -692,3 +692,35 @@ def test_version_16_drags_the_drawer_pushed_back_out_with_the_fist_and_opens_the
     ~516, inside the release's horizon (520)."""
     out = tune26_attempt(tmp_path, "libero_goal", "open_the_top_drawer_and_put_the_bowl_inside", 52122322, 369)
     assert out.success, out
+
+
+@pytest.mark.sim
+def test_a_book_lying_on_its_face_is_pinched_by_a_top_corner_and_stood_up(tmp_path):
+    """A tuning-state scene (`benchmarks/book_poses.py`, kind `face`: libero_90 STUDY_SCENE2,
+    the book into the back compartment, init state 1, seed 7021): the goal book lies flat on a
+    face, which no top-down grasp takes (version 18: every such scene `retries_exhausted` or a
+    timeout). Pinched across a top corner's two edge faces, lifted level, the hand turned by
+    the book's whole tilt high over the table, it is set down standing on its bottom edge, then
+    grasped from above and slotted as usual."""
+    from benchmarks.book_poses import make_scene
+    from pipeline.policies.scripted.recovery.face_book import lying_on_face
+    from pipeline.release.experts import attempt, recovery_expert
+    from pipeline.sim import get_task
+
+    env = build_env(get_task("libero_90", "STUDY_SCENE2_pick_up_the_book_and_place_it_in_the_back_compartment_of_the_caddy"))
+    try:
+        env.reset_to_init(1)
+        state, book = make_scene(env, "face", np.random.default_rng(7021))
+        assert lying_on_face(Scene(env), book) is not None
+        seen = {}
+
+        def standing(info):
+            ax = lying_on_face(Scene(env), book)
+            if ax is None and "stood" not in seen and not Scene(env).holding(book):
+                seen["stood"] = info.step
+
+        out = attempt(env, state, recovery_expert(env, 0, 0.0), 0, 520, 8, on_step=standing)
+        assert out.success, out
+        assert "stood" in seen, seen  # off its face and let go before it was carried in
+    finally:
+        env.close()

@@ -3,7 +3,8 @@
 Attempt k > 0 grasps differently: the k-th best grasp candidate (another yaw or rim side,
 for side-lying bottles and mugs as for upright ones), approached from higher up, with the
 retry shift of `variation.RetryNoise`. A book that leans or lies tilted is picked up by its
-top edge with a tilted hand and turned upright in the hand (stand_book.py). An object no
+top edge with a tilted hand and turned upright in the hand (stand_book.py); one lying on its
+face is pinched by a top corner, turned upright and set down standing (face_book.py). An object no
 grasp reaches clear of its neighbours is first pushed clear (nudge.py). The planner calls
 it again from the live state.
 """
@@ -20,6 +21,7 @@ from pipeline.policies.scripted.notes import Note, Outcome
 from pipeline.policies.scripted.placement import (box_centre_offset, destination, inside_region, region_box,
                                                   support_ceiling, turned_foot)
 from pipeline.policies.scripted.recovery import checks
+from pipeline.policies.scripted.recovery.face_book import lying_on_face, stand_from_face
 from pipeline.policies.scripted.recovery.long_grasp import lying_long, slide_clear
 from pipeline.policies.scripted.recovery.nudge import palm_clear, push, push_plan
 from pipeline.policies.scripted.recovery.lying_cup import grasp_by_handle, lying_handle_grasp, place_by_handle
@@ -136,6 +138,11 @@ def pick_place_once(ctx: Ctx, conjunct: tuple[str, ...], attempt: int) -> Plan:
     by_handle = False
     book = None  # a book this attempt stands up in the hand
     if not carried(s, obj, checks.held(s)):
+        face = lying_on_face(s, obj)
+        if face is not None and (yield from stand_from_face(ctx, obj, face, attempt)):
+            if ctx.truth is not None:  # standing (or not): the next attempt grasps it as it is
+                ctx.truth.end_hand(obj, False)
+            return
         book = stand_tilt(s, obj)
         turn = None if book is None else turn_first(s, book)
         if turn is not None:

@@ -215,7 +215,15 @@ def quarter_turn(ctx: Ctx, obj: str, ax: BookAxes, angle: float = 2 * PITCH, gra
     yield from _edge_grasp_turn(ctx, obj, held, lift=max(lift, 0.04), to=a2, rot_tol=0.06)
     yield Grip(1.0, SETTLE_STEPS // 2, label="settle")
     if upright:
-        a2 = yield from _straighten(ctx, obj, np.cross(a1, a2), a2)
+        a2 = yield from straighten(ctx, obj, np.cross(a1, a2), a2)
+    yield from set_down(ctx, obj, was, a2, level=not upright)
+
+
+def set_down(ctx: Ctx, obj: str, was: np.ndarray, a2: np.ndarray, level: bool) -> Plan:
+    """Lower the book the hand holds, pointing along `a2`, until it stands just over the
+    support at `was` (xy, where it lay or stood: free), let go, back off along the hand and
+    rise; `level`: turning the hand back to pointing down on the way up."""
+    s = ctx.scene
     box = s.box(obj)
     gap = box.lo[2] - s.support_top(was, 0.01, {obj})
     # turning about the grip site carried the book aside: back over where it was
@@ -229,12 +237,12 @@ def quarter_turn(ctx: Ctx, obj: str, ax: BookAxes, angle: float = 2 * PITCH, gra
         yield ctx.move(s.eef() - a2 * 0.04, yaw=yaw2, approach=a2, tol=0.015, max_steps=12, label="back_off")
     finally:
         ctx.approach_hold = None
-    # before another quarter (`upright` False: upside down, on a side) the hand turns back to
-    # pointing down while it rises: left tilted, the next attempt first sent it home across the
-    # table (`back_out`: an awkward arm) and back (measured: 55 steps over an upside-down book's
-    # two turns). After a turn that stands the book it gained nothing (the next grasp came at
-    # the same step) and a tuning book then jammed on the compartment's rim: as before there
-    level = not upright
+    # `level` before another quarter (`quarter_turn` not `upright`: upside down, on a side):
+    # the hand turns back to pointing down while it rises; left tilted, the next attempt first
+    # sent it home across the table (`back_out`: an awkward arm) and back (measured: 55 steps
+    # over an upside-down book's two turns). After a turn that stands the book it gained
+    # nothing (the next grasp came at the same step) and a tuning book then jammed on the
+    # compartment's rim: not there
     yield ctx.move(s.eef() + [0.0, 0.0, 0.05], yaw=yaw2, tol=0.03, rot_tol=LEVEL_TOL if level else None,
                    max_steps=30 if level else 15, label="retreat")
     if abs(yaw2) > np.pi / 2 + 0.3:
@@ -271,7 +279,7 @@ def _turn_way(s: Scene, ax: BookAxes, angle: float, grasp_pitch: float) -> tuple
     return a1, a2
 
 
-def _straighten(ctx: Ctx, obj: str, axis: np.ndarray, approach: np.ndarray) -> Plan:
+def straighten(ctx: Ctx, obj: str, axis: np.ndarray, approach: np.ndarray) -> Plan:
     """Pitch the hand on about `axis` (the turn's) while the book it holds lags more than
     LAG_TOL short of upright, as far as MAX_TILT; returns the hand's approach then. Held by
     a corner, the book pivots in the fingers by a varying amount (measured: 17-29 deg on

@@ -1,0 +1,141 @@
+"""Skill: stand up a book lying on its face, by a pinch across one of its top corners.
+
+Input: a `Ctx` and a book `obj` (`stand_book.book_axes`) whose faces lie within
+`stand_book.FACE_UP` of level. No grasp of a parallel gripper takes such a book as it lies:
+its face is 11 x 13.4 cm, wider than the open fingers either way, and its 2.9 cm thickness is
+upright against the table (a pinch across the top end's edge was tried and left: README).
+A corner is narrower: the fingers, the hand pointing down, close along a level line that cuts
+off a top corner, CORNER_LEG_M along each of its two edge faces (a 4.2 cm chord). Each finger
+meets its face 45 deg from square, inside the pads' friction cone (friction 2.0: 63 deg).
+Output: primitives that
+1. pinch that corner at mid-thickness and lift: the book pivots about the pinch line (the
+   contacts lie on it, nothing holds it there) and hangs in the vertical plane of that line,
+   its up axis 45 deg from vertical (the corner's diagonal turned up);
+2. pitch the hand 45 deg in that plane, so the book's up axis stands vertical, as far as its
+   live tilt asks;
+3. set it down on its bottom edge where it lay and let go (`stand_book.set_down`).
+The next attempt finds a standing book and grasps it from above as usual.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Generator
+
+import numpy as np
+
+from pipeline.policies.scripted.hand import FINGER_REACH, closing_yaw
+from pipeline.policies.scripted.motion import HAND_CLEARANCE, Ctx, travel
+from pipeline.policies.scripted.primitives import Grip, Primitive, axis_angle_matrix
+from pipeline.policies.scripted.recovery import checks
+from pipeline.policies.scripted.recovery.stand_book import (FACE_UP, LEVEL_TOL, SETTLE_STEPS, BookAxes,
+                                                            book_axes, set_down)
+from pipeline.policies.scripted.scene import TABLE_MARGIN, Scene
+from pipeline.policies.scripted.stack import carried
+
+CORNER_LEG_M = 0.03  # the pinch line meets each edge face this far from the corner
+FINGER_ROOM_M = 0.012  # an open fingertip's spot on the table must be clear this far around
+# corners are pinched in order of how much of the hand's line along its closing axis
+# (HAND_HALF_M either way: the hand is wider than its open fingers) comes within CROWDED_M of
+# another object standing HAND_ABOVE_M over the grip site: the hand came down on a mug or the
+# caddy's wall and the fingers closed on nothing (measured: two tuning-state scenes)
+CROWDED_M = 0.02
+HAND_ABOVE_M = 0.04
+HAND_HALF_M = 0.1
+HOVER_M = 0.06
+LIFT_SPEED = 0.5
+TURN_MAX = np.radians(95.0)  # most the hand turns from pointing down, high over the table
+LIFT_CLEAR_M = 0.03  # the turned book's lowest point over the table
+LEVEL_STEPS = 30  # more to bring the hand back from pointing level (`set_down` gives 30)
+
+
+def lying_on_face(scene: Scene, obj: str) -> BookAxes | None:
+    """The book's axes when `obj` is a book lying on a face; None otherwise."""
+    ax = book_axes(scene, obj)
+    return ax if ax is not None and abs(float(ax.thin[2])) > FACE_UP else None
+
+
+def _level(v: np.ndarray) -> np.ndarray:
+    h = np.array([v[0], v[1], 0.0])
+    return h / max(float(np.linalg.norm(h)), 1e-9)
+
+
+def corner_pinches(scene: Scene, obj: str, ax: BookAxes) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(grip site, closing axis) for each top corner whose two open fingertips land on free
+    table, best first: the hand clearer of other objects (`_crowded`), then nearer the robot's base."""
+    u = _level(ax.up)
+    side = _level(ax.long)
+    half = 0.5 * float(np.linalg.norm(ax.ends[1] - ax.ends[0]))
+    z = max(float(ax.top_mid[2]), scene.table_height() + TABLE_MARGIN)
+    base = scene.env.robot_base()
+    out = []
+    for sg in (1.0, -1.0):
+        corner = ax.top_mid + side * sg * half
+        on_side, on_top = corner - u * CORNER_LEG_M, corner - side * sg * CORNER_LEG_M
+        grip = np.array([*((on_side + on_top) / 2)[:2], z])
+        k = _level(on_side - on_top)
+        tips = [grip + k * FINGER_REACH, grip - k * FINGER_REACH]
+        free = all(scene.support_top(t[:2], FINGER_ROOM_M, {obj}) < scene.table_height() + 0.005 for t in tips)
+        if free:
+            crowded = _crowded(scene, obj, grip, k)
+            out.append((crowded, float(np.linalg.norm((grip - base)[:2])), grip, k))
+    return [(g, k) for *_, g, k in sorted(out, key=lambda o: (o[0], o[1]))]
+
+
+def _crowded(scene: Scene, obj: str, grip: np.ndarray, k: np.ndarray) -> int:
+    """How many points of the hand's line come within CROWDED_M of another object reaching
+    the hand (0: clear)."""
+    line = [grip[:2] + k[:2] * d for d in np.linspace(-HAND_HALF_M, HAND_HALF_M, 11)]
+    boxes = [b for name, b in scene.obstacle_boxes({obj}) if name != "table" and b[1, 2] > grip[2] + HAND_ABOVE_M]
+    return sum(any(np.all(b[0, :2] - CROWDED_M <= p) and np.all(p <= b[1, :2] + CROWDED_M) for b in boxes)
+               for p in line)
+
+
+def stand_from_face(ctx: Ctx, obj: str, ax: BookAxes, attempt: int) -> Generator[Primitive, None, bool]:
+    """Pinch a top corner (attempt k: the k-th best), lift, turn the book upright in the
+    hand, set it down standing, let go. Returns False, having yielded nothing, when no corner
+    has room for the fingers; True otherwise (the next attempt finds the book as it is)."""
+    s = ctx.scene
+    pinches = corner_pinches(s, obj, ax)
+    if not pinches:
+        return False
+    grip, k = pinches[attempt % len(pinches)]
+    yaw = min((closing_yaw(k), closing_yaw(-k)), key=abs)  # the same line: the wrist's middle
+    was = s.box(obj).centre[:2]  # a free spot: the book lay there
+    height = 2 * float(np.linalg.norm(ax.top_mid - (ax.ends[0] + ax.ends[1]) / 2))
+    ctx.note(face_book=True)
+    if not s.gripper_open():
+        yield Grip(-1.0, ctx.open_steps + 4, label="release")
+    hover = grip + [0.0, 0.0, HOVER_M]
+    yield from travel(ctx, hover, yaw, -1.0, s.path_clearance(s.eef(), hover, 0.06, set()) + HAND_CLEARANCE)
+    yield ctx.move(hover, yaw=yaw, tol=0.012, rot_tol=0.1, label="hover")
+    yield ctx.move(grip, speed=0.5, yaw=yaw, tol=0.006, max_steps=50, label="descend")
+    ctx.yaw_hold = yaw
+    yield Grip(1.0, ctx.close_steps, label="close")
+    # the pinch holds the book level as it rises (measured: it does not pivot in the pads);
+    # turned, its bottom edge swings down to its height below the fingers
+    up = s.eef().copy()
+    up[2] = s.table_height() + height + LIFT_CLEAR_M
+    yield ctx.move(up, gripper=1.0, speed=LIFT_SPEED, yaw=yaw, tol=0.02, max_steps=80, label="pick_lift")
+    yield Grip(1.0, SETTLE_STEPS, label="settle")
+    held = book_axes(s, obj)
+    if held is None or not carried(s, obj, checks.held(s)):
+        return True
+    # the hand turns with the book by its whole tilt about the level axis that stands it: up
+    # here, the wrist reaches pointing level (low over the table it does not: `MAX_TILT`)
+    tilt = float(np.arccos(np.clip(held.up[2], -1.0, 1.0)))
+    axis = np.cross(held.up, [0.0, 0.0, 1.0])
+    a2 = np.array([0.0, 0.0, -1.0])
+    if np.linalg.norm(axis) > 1e-6:
+        a2 = axis_angle_matrix(axis, min(tilt, TURN_MAX)) @ a2
+    ctx.approach_hold = a2
+    try:
+        yield ctx.move(s.eef(), gripper=1.0, yaw=yaw, approach=a2, tol=0.03, rot_tol=0.06, max_steps=90,
+                       label="turn")
+        yield Grip(1.0, SETTLE_STEPS // 2, label="settle")
+    finally:
+        ctx.approach_hold = None
+    yield from set_down(ctx, obj, was, a2, level=True)
+    # `set_down`'s rise brings the hand back from pointing level only part of the way
+    yield ctx.move(s.eef() + [0.0, 0.0, 0.02], yaw=ctx.yaw_hold, tol=0.03, rot_tol=LEVEL_TOL, max_steps=LEVEL_STEPS,
+                   label="level")
+    return True
