@@ -5,16 +5,18 @@ Input: a `Ctx` and a book `obj` (`stand_book.book_axes`) whose faces lie within
 its face is 11 x 13.4 cm, wider than the open fingers either way, and its 2.9 cm thickness is
 upright against the table (a pinch across the top end's edge was tried and left: README).
 A corner is narrower: the fingers, the hand pointing down, close along a level line that cuts
-off a top corner, CORNER_LEG_M along each of its two edge faces (a 4.2 cm chord). Each finger
+off a top corner, CORNER_LEG_M along each of its two edge faces (a 4.2 cm chord); each pad
 meets its face 45 deg from square, inside the pads' friction cone (friction 2.0: 63 deg).
 Output: primitives that
-1. pinch that corner at mid-thickness and lift: the book pivots about the pinch line (the
-   contacts lie on it, nothing holds it there) and hangs in the vertical plane of that line,
-   its up axis 45 deg from vertical (the corner's diagonal turned up);
-2. pitch the hand 45 deg in that plane, so the book's up axis stands vertical, as far as its
-   live tilt asks;
-3. set it down on its bottom edge where it lay and let go (`stand_book.set_down`).
-The next attempt finds a standing book and grasps it from above as usual.
+1. pinch that corner low on its edge faces and lift: the pads hold the book rigid, level
+   (measured: it does not pivot about the pinch line);
+2. turn the hand with it by the book's whole tilt (a quarter) about the level axis that
+   stands it up: the hand then points level along the book's old up axis, which the wrist
+   reaches high over the table (low over it, it does not: `stand_book.MAX_TILT`);
+3. set it down on its bottom edge where it lay, let go, and bring the hand back to pointing
+   down (`stand_book.set_down`).
+The next attempt finds a standing book and grasps it from above as usual. Of the two top
+corners, the one the hand comes down to clearest of other objects goes first.
 """
 
 from __future__ import annotations
