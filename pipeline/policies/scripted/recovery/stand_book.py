@@ -215,7 +215,7 @@ def quarter_turn(ctx: Ctx, obj: str, ax: BookAxes, angle: float = 2 * PITCH, gra
     yield from _edge_grasp_turn(ctx, obj, held, lift=max(lift, 0.04), to=a2, rot_tol=0.06)
     yield Grip(1.0, SETTLE_STEPS // 2, label="settle")
     if upright:
-        a2 = yield from straighten(ctx, obj, np.cross(a1, a2), a2)
+        a2 = yield from _straighten(ctx, obj, np.cross(a1, a2), a2)
     yield from set_down(ctx, obj, was, a2, level=not upright)
 
 
@@ -279,7 +279,7 @@ def _turn_way(s: Scene, ax: BookAxes, angle: float, grasp_pitch: float) -> tuple
     return a1, a2
 
 
-def straighten(ctx: Ctx, obj: str, axis: np.ndarray, approach: np.ndarray) -> Plan:
+def _straighten(ctx: Ctx, obj: str, axis: np.ndarray, approach: np.ndarray) -> Plan:
     """Pitch the hand on about `axis` (the turn's) while the book it holds lags more than
     LAG_TOL short of upright, as far as MAX_TILT; returns the hand's approach then. Held by
     a corner, the book pivots in the fingers by a varying amount (measured: 17-29 deg on
