@@ -66,7 +66,7 @@ def corner_pinches(scene: Scene, obj: str, ax: BookAxes) -> list[tuple[np.ndarra
     table, best first: the hand clearer of other objects (`_crowded`), then nearer the robot's base."""
     u = _level(ax.up)
     side = _level(ax.long)
-    half = 0.5 * float(np.linalg.norm(ax.ends[1] - ax.ends[0]))
+    half = 0.5 * ax.length
     z = max(float(ax.top_mid[2]), scene.table_height() + TABLE_MARGIN)
     base = scene.env.robot_base()
     out = []
@@ -103,7 +103,6 @@ def stand_from_face(ctx: Ctx, obj: str, ax: BookAxes, attempt: int) -> Generator
     grip, k = pinches[attempt % len(pinches)]
     yaw = min((closing_yaw(k), closing_yaw(-k)), key=abs)  # the same line: the wrist's middle
     was = s.box(obj).centre[:2]  # a free spot: the book lay there
-    height = 2 * float(np.linalg.norm(ax.top_mid - (ax.ends[0] + ax.ends[1]) / 2))
     ctx.note(face_book=True)
     if not s.gripper_open():
         yield Grip(-1.0, ctx.open_steps + 4, label="release")
@@ -116,7 +115,7 @@ def stand_from_face(ctx: Ctx, obj: str, ax: BookAxes, attempt: int) -> Generator
     # the pinch holds the book level as it rises (measured: it does not pivot in the pads);
     # turned, its bottom edge swings down to its height below the fingers
     up = s.eef().copy()
-    up[2] = s.table_height() + height + LIFT_CLEAR_M
+    up[2] = s.table_height() + ax.height + LIFT_CLEAR_M
     yield ctx.move(up, gripper=1.0, speed=LIFT_SPEED, yaw=yaw, tol=0.02, max_steps=80, label="pick_lift")
     yield Grip(1.0, SETTLE_STEPS, label="settle")
     held = book_axes(s, obj)

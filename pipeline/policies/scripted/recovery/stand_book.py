@@ -81,6 +81,16 @@ class BookAxes:
     long: np.ndarray  # world unit vector along its bottom edge
     ends: tuple[np.ndarray, np.ndarray]  # world points: middles of the two ends along `long`
 
+    @property
+    def length(self) -> float:
+        """Its size along `long` (its bottom edge)."""
+        return float(np.linalg.norm(self.ends[1] - self.ends[0]))
+
+    @property
+    def height(self) -> float:
+        """Its size along `up`: twice the top edge's distance from its centre."""
+        return 2 * float(np.linalg.norm(self.top_mid - (self.ends[0] + self.ends[1]) / 2))
+
 
 def book_axes(scene: Scene, obj: str) -> BookAxes | None:
     """A book's axes from its collision boxes in its body frame, or None when `obj` is not
@@ -185,7 +195,7 @@ def slot_size(s: Scene, obj: str) -> tuple[float, float] | None:
     if ax is None:
         return None
     corners = s.env.object_corners(obj)
-    return float(np.linalg.norm(ax.ends[1] - ax.ends[0])), float(np.ptp(corners @ ax.thin))
+    return ax.length, float(np.ptp(corners @ ax.thin))
 
 
 def _off_upright(s: Scene, obj: str) -> float:
@@ -313,7 +323,7 @@ def _rot_off(s: Scene, yaw: float, approach: np.ndarray | None) -> float:
 def _plane_corners(ax: BookAxes) -> list[np.ndarray]:
     """The book's four corners in its mid-plane (world)."""
     side = np.cross(ax.thin, ax.up)
-    half = 0.5 * float(np.linalg.norm(ax.ends[1] - ax.ends[0]))
+    half = 0.5 * ax.length
     centre_top = ax.top_mid
     centre_bottom = (ax.ends[0] + ax.ends[1]) - centre_top  # ends' mean is the centre
     return [c + side * s * half for c in (centre_top, centre_bottom) for s in (-1.0, 1.0)]
