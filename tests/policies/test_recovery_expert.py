@@ -724,3 +724,31 @@ def test_a_book_lying_on_its_face_is_pinched_by_a_top_corner_and_stood_up():
         assert "stood" in seen, seen  # off its face and let go before it was carried in
     finally:
         env.close()
+
+
+@pytest.mark.sim
+@pytest.mark.parametrize("task, seed, step, init", [
+    # the tray's rim under the palm: the descent stood still on it, 51 steps, twice
+    ("LIVING_ROOM_SCENE3_pick_up_the_tomato_sauce_and_put_it_in_the_tray", 1449910339, 101, 3),
+    # the book's grasps: descents standing on the caddy 51-56 steps each, four times
+    ("STUDY_SCENE3_pick_up_the_book_and_place_it_in_the_front_compartment_of_the_caddy", 70441778, 220, 0),
+])
+def test_version_21_ends_an_empty_hands_move_that_stands_still(task, seed, step, init):
+    """Two tuning scenes version 20 left uncertified (tunewide, tunebooks; timeout and
+    `retries_exhausted` at the release's horizon): the empty hand's moves stood still against
+    something until their max_steps. Ended after 16 steps without 5 mm or 0.03 rad of
+    progress (`expert.STALL_*`), the same tries fit in the horizon: both certified."""
+    from pipeline.policies.scripted.primitives import Move
+
+    ran = {}  # id -> (primitive, steps it was running); the primitive kept, so ids stay unique
+
+    def watch(env, policy):
+        def on_step(_):
+            prim = policy._prim
+            ran[id(prim)] = (prim, ran.get(id(prim), (prim, 0))[1] + 1)
+        return on_step
+
+    out = tuning_attempt("libero_90", task, seed, step, init=init, watch=watch)
+    ended = [p.label for p, n in ran.values() if isinstance(p, Move) and p.steps >= p.max_steps and n < p.max_steps - 8]
+    assert out.success, out
+    assert ended, "no move was ended for standing still"

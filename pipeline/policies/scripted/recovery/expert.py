@@ -11,7 +11,7 @@ from pipeline.policies.scripted.motion import Ctx, Plan
 from pipeline.policies.scripted.noise import episode_rng
 from pipeline.policies.scripted.notes import Halt, Note
 from pipeline.policies.scripted.policy import ScriptedPolicy
-from pipeline.policies.scripted.primitives import Move
+from pipeline.policies.scripted.primitives import Move, rotation_error
 from pipeline.policies.scripted.recovery import checks
 from pipeline.policies.scripted.recovery.planner import recover
 from pipeline.policies.scripted.recovery.reasons import GiveUp, GiveUpReason
@@ -24,7 +24,14 @@ STUCK_M = 0.004  # grip-site travel over one chunk below which a Move counts as 
 UNLOCK_STEPS = 4  # steps per unlocking chunk (re-checked after each)
 UNLOCK_MAX = 24  # most steps of one unlocking
 UNLOCK_TILT = 0.5  # rotation action (x 0.5 rad) about the horizontal axis that tilts the hand
-
+# an open hand's Move whose grip site went less than STALL_M and turned less than STALL_RAD
+# over the last STALL_STEPS steps is pressed against something: it is over (its max_steps
+# would end it where it stands, up to 80 steps later; the slowest moves, speed 0.3, go ~6 cm
+# in 16 steps). A closed hand goes on: pressing a bottle down settles it into the rack's slot
+# (measured: ended there, it was not in, and the next try took 125 steps more)
+STALL_STEPS = 16
+STALL_M = 0.005
+STALL_RAD = 0.03
 
 class RecoveryExpert(ScriptedPolicy):
     def __init__(self, variation: float = 0.0, budget_steps: int | None = None, name: str | None = None):
@@ -37,6 +44,8 @@ class RecoveryExpert(ScriptedPolicy):
         self._now = 0
         self._eef = None
         self._unlocking = 0
+        self._poses: list[tuple[int, np.ndarray, np.ndarray]] = []  # (step, grip site, rotation) per chunk
+        self._stall_prim: Move | None = None
 
     def reset(self, task: TaskSpec, seed: int) -> None:
         super().reset(task, seed)
@@ -45,9 +54,12 @@ class RecoveryExpert(ScriptedPolicy):
         self._now = 0
         self._eef = None
         self._unlocking = 0
+        self._poses = []
+        self._stall_prim = None
 
     def act(self, obs):
         self._now = obs.step
+        self._end_stalled(obs)
         prev = self._prim
         chunk = super().act(obs)
         eef = obs.sim.eef_pose()[0]
@@ -63,6 +75,27 @@ class RecoveryExpert(ScriptedPolicy):
             return self._unlock(chunk)
         self._unlocking = 0
         return chunk
+
+    def _end_stalled(self, obs) -> None:
+        """Mark the current Move done once it stalls (STALL_*) with the hand open, unless the
+        elbow is locked: that is a pose the unlocking below gets out of, not something in the
+        way. Poses are sampled at each chunk (chunks end early near a target: by steps)."""
+        prim = self._prim
+        if not isinstance(prim, Move) or prim.label == "idle" or prim.gripper > 0:
+            self._poses = []
+            return
+        if self._stall_prim is not prim:
+            self._stall_prim, self._poses = prim, []
+        pos, rot = obs.sim.eef_pose()
+        self._poses.append((obs.step, pos, rot))
+        back = [p for p in self._poses if obs.step - p[0] >= STALL_STEPS]
+        if not back or self._unlocking:
+            return
+        _, p0, r0 = back[-1]
+        if (float(np.linalg.norm(pos - p0)) < STALL_M and float(np.linalg.norm(rotation_error(r0, rot))) < STALL_RAD
+                and not checks.elbow_locked(self._ctx.scene)):
+            prim.steps = prim.max_steps
+            self._poses = []
 
     def _unlock(self, chunk: np.ndarray) -> np.ndarray:
         """A few steps that tilt the hand toward the robot base while still moving toward the
