@@ -33,6 +33,7 @@ STALL_STEPS = 16
 STALL_M = 0.005
 STALL_RAD = 0.03
 
+
 class RecoveryExpert(ScriptedPolicy):
     def __init__(self, variation: float = 0.0, budget_steps: int | None = None, name: str | None = None):
         super().__init__(ScriptedPolicyConfig(noise=variation_levels(variation), max_attempts=1),
@@ -79,7 +80,7 @@ class RecoveryExpert(ScriptedPolicy):
     def _end_stalled(self, obs) -> None:
         """Mark the current Move done once it stalls (STALL_*) with the hand open, unless the
         elbow is locked: that is a pose the unlocking below gets out of, not something in the
-        way. Poses are sampled at each chunk (chunks end early near a target: by steps)."""
+        way. The window is counted in steps, not chunks: near a target a chunk is 1-2 steps."""
         prim = self._prim
         if not isinstance(prim, Move) or prim.label == "idle" or prim.gripper > 0:
             self._poses = []
