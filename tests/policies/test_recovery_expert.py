@@ -601,6 +601,18 @@ def test_a_bottle_lying_beside_the_base_is_grasped_with_the_hand_pitched_toward_
 
 
 @pytest.mark.sim
+@pytest.mark.xfail(strict=True, reason="the level perched bowl, put in straight from the wall, comes down leaning "
+                                       "on the side wall; the attempt times out (tunewide i3, versions 19-21)")
+def test_a_bowl_perched_on_the_bottom_drawers_wall_ends_in_the_closed_drawer():
+    """The outcome the test below no longer asserts, kept as a known failure: the same scene
+    closed at step ~290 where it was first found (remade leaning there); here it times out.
+    Strict: the day it passes, this mark must go."""
+    out = tuning_attempt("libero_10", "KITCHEN_SCENE4_put_the_black_bowl_in_the_bottom_drawer_of_the_cabinet_and_close_it",
+                         173332742, 159, init=3)
+    assert out.success and out.steps <= 330, out
+
+
+@pytest.mark.sim
 def test_a_bowl_perched_on_the_bottom_drawers_wall_is_put_in_again_before_the_first_push():
     """A tuning scene (tunewide: libero_10 KITCHEN_SCENE4, init state 3, step 159): the bowl
     dropped into the open bottom drawer sits on its wall, 6.5 cm over the floor, its top over
@@ -612,8 +624,8 @@ def test_a_bowl_perched_on_the_bottom_drawers_wall_is_put_in_again_before_the_fi
     the bowl was remade leaning (set aside, put in from the table: closed at step ~290); on
     the machines of the twelfth and thirteenth sessions and CI's (AMD EPYC) the same seed
     remakes it level, it is put in straight from the wall, comes down leaning on the side
-    wall, and the attempt times out. The rule is asserted here; the outcome is measured by
-    the tuning runs' certification."""
+    wall, and the attempt times out. The rule is asserted here; the outcome is the strict
+    known failure above."""
     from pipeline.policies.scripted.recovery import checks
     from pipeline.policies.scripted.scene import Scene
 
