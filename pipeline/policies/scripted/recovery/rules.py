@@ -26,6 +26,7 @@ from pipeline.policies.scripted.motion import Ctx, Plan
 from pipeline.policies.scripted.placement import destination
 from pipeline.policies.scripted.recovery import checks
 from pipeline.policies.scripted.recovery.back_out import back_out, let_go
+from pipeline.policies.scripted.recovery.face_book import lying_on_face, pinch_blockers
 from pipeline.policies.scripted.recovery.low_drawer import hook_low_drawer, low_handle
 from pipeline.policies.scripted.recovery.operate import operate_once
 from pipeline.policies.scripted.recovery.pick_place import pick_place_once
@@ -195,6 +196,9 @@ def in_the_way(r: Round) -> str | None:
     # (another grasp candidate first, see pick_place_once; aside if none is clear)
     k = checks.clear_grasp_choice(s, sub[1], dest, tries[sub])
     in_way += checks.tip_blockers(s, sub[1], plan_grasp(s, sub[1], dest, k), r.keep)
+    # a book on its face is pinched by a top corner instead: what takes a fingertip's spot there
+    if (face := lying_on_face(s, sub[1])) is not None:
+        in_way += pinch_blockers(s, sub[1], face, r.keep)
     block = [b for b in in_way if r.aside[b] < MAX_ASIDE]
     if block:
         debug("aside", block)
