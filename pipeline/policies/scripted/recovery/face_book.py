@@ -103,8 +103,8 @@ def corner_pinches(scene: Scene, obj: str, ax: BookAxes) -> list[tuple[np.ndarra
 
 def pinch_blockers(scene: Scene, obj: str, ax: BookAxes, keep: set[str]) -> list[str]:
     """Where no top corner has room for the fingers (`corner_pinches`): the movable objects
-    (not in `keep`) whose boxes take a fingertip's spot at a corner that those alone block,
-    fewest first; [] where a corner is free or none is freed that way. Without a corner the
+    (not in `keep`) whose boxes take the fingertips' spots at the corner that they alone block
+    (of two such corners, the one with fewer); [] where a corner is free or none is freed that way. Without a corner the
     attempt fell to top-down grasps of the flat book, which slid off it twice before the
     neighbour under the tip was set aside (measured: ~200 steps, one tuning scene)."""
     if corner_pinches(scene, obj, ax):
