@@ -767,10 +767,9 @@ def test_version_21_ends_an_empty_hands_move_that_stands_still(task, seed, step,
 
 
 def _book_tilt(env, book: str) -> float:
-    from pipeline.policies.scripted.recovery.stand_book import book_axes
+    from pipeline.policies.scripted.recovery.stand_book import _off_upright
 
-    ax = book_axes(Scene(env), book)
-    return float(np.degrees(np.arccos(np.clip(ax.up[2], -1.0, 1.0))))
+    return float(np.degrees(_off_upright(Scene(env), book)))
 
 
 @pytest.mark.sim

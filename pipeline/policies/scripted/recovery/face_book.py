@@ -103,16 +103,17 @@ def corner_pinches(scene: Scene, obj: str, ax: BookAxes) -> list[tuple[np.ndarra
 
 def pinch_blockers(scene: Scene, obj: str, ax: BookAxes, keep: set[str]) -> list[str]:
     """Where no top corner has room for the fingers (`corner_pinches`): the movable objects
-    (not in `keep`) whose boxes take the fingertips' spots at the corner that they alone block
-    (of two such corners, the one with fewer); [] where a corner is free or none is freed that way. Without a corner the
-    attempt fell to top-down grasps of the flat book, which slid off it twice before the
-    neighbour under the tip was set aside (measured: ~200 steps, one tuning scene)."""
-    if corner_pinches(scene, obj, ax):
-        return []
+    (not in `keep`) whose boxes take the fingertips' spots at the corner that they alone
+    block (of two such corners, the one with fewer); [] where a corner is free or none is
+    freed that way. Without a corner the attempt fell to top-down grasps of the flat book,
+    which slid off it twice before the neighbour under the tip was set aside (measured: ~200
+    steps, one tuning scene)."""
     loose = sorted(o for o in scene.env.object_names if o != obj and o not in keep)
     options = []
     for grip, k in _corners(scene, ax):
         blocked = [t for t in _tips(grip, k) if not _tip_free(scene, obj, t)]
+        if not blocked:  # this corner can be pinched as it is
+            return []
         movers = [o for o in loose if any(not _tip_free(scene, obj, t, frozenset(set(loose) - {o})) for t in blocked)]
         if all(_tip_free(scene, obj, t, frozenset(movers)) for t in blocked):
             options.append(movers)
