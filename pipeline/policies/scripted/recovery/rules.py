@@ -32,6 +32,7 @@ from pipeline.policies.scripted.recovery.operate import operate_once
 from pipeline.policies.scripted.recovery.pick_place import pick_place_once
 from pipeline.policies.scripted.recovery.put_aside import put_aside
 from pipeline.policies.scripted.recovery.reasons import GiveUp, GiveUpReason
+from pipeline.policies.scripted.recovery.stand_book import edge_blockers, stand_tilt
 from pipeline.policies.scripted.recovery.under_drawer import clear_from_under
 from pipeline.policies.scripted.recovery.unwind import unwind
 from pipeline.policies.scripted.recovery.variation import RetryNoise
@@ -199,6 +200,9 @@ def in_the_way(r: Round) -> str | None:
     # a book on its face is pinched by a top corner instead: what takes a fingertip's spot there
     if (face := lying_on_face(s, sub[1])) is not None:
         in_way += pinch_blockers(s, sub[1], face, r.keep)
+    # a tilted book is grasped by its top edge or a corner, the hand tilted: what that hand meets
+    elif (book := stand_tilt(s, sub[1])) is not None:
+        in_way += edge_blockers(s, sub[1], book, r.keep)
     block = [b for b in in_way if r.aside[b] < MAX_ASIDE]
     if block:
         debug("aside", block)
