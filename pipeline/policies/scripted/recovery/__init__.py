@@ -10,8 +10,9 @@ every skill; when it cannot, it stops with a `GiveUpReason`.
 Skills, one per file: `pick_place` (pose-aware grasp, different on retry, fingers clear of
 neighbours; `long_grasp` slides a lying long object's grasp clear of the palm), `stand_book`
 (a leaning book picked up by its top edge with a tilted hand and turned upright in the hand,
-then slotted by its own size; an upside-down or side-lying one turned a quarter at a time
-first), `operate`
+then slotted by its own size; a side-lying one turned a quarter at a time first),
+`face_book` (one lying on a face pinched by a top corner and stood up), `tip_book` (one
+standing upside down pushed over onto a face first), `operate`
 (drawers, doors, knobs), `put_aside`, `back_out`, `unwind` (a wrist pinned at its joint
 limit: the joint path to the home joints), and the shared `scripted.insert` (into a
 roofed container through its door, e.g. a mug into the microwave); `checks` reads the

@@ -33,6 +33,7 @@ from pipeline.policies.scripted.recovery.pick_place import pick_place_once
 from pipeline.policies.scripted.recovery.put_aside import put_aside
 from pipeline.policies.scripted.recovery.reasons import GiveUp, GiveUpReason
 from pipeline.policies.scripted.recovery.stand_book import edge_blockers, stand_tilt
+from pipeline.policies.scripted.recovery.tip_book import tip_way
 from pipeline.policies.scripted.recovery.under_drawer import clear_from_under
 from pipeline.policies.scripted.recovery.unwind import unwind
 from pipeline.policies.scripted.recovery.variation import RetryNoise
@@ -201,7 +202,7 @@ def in_the_way(r: Round) -> str | None:
     if (face := lying_on_face(s, sub[1])) is not None:
         in_way += pinch_blockers(s, sub[1], face, r.keep)
     # a tilted book is grasped by its top edge or a corner, the hand tilted: what that hand meets
-    elif (book := stand_tilt(s, sub[1])) is not None:
+    elif (book := stand_tilt(s, sub[1])) is not None and tip_way(s, sub[1]) is None:  # (tipped: untouched)
         in_way += edge_blockers(s, sub[1], book, r.keep)
     block = [b for b in in_way if r.aside[b] < MAX_ASIDE]
     if block:
@@ -318,7 +319,8 @@ def attempt(r: Round, _: bool) -> Plan:
     if sub[0] == Predicate.IN and insert.can_insert(s, sub):
         yield from insert.insert(ctx, sub, insert.ACROSS_SPEED)  # through a door opening, under a roof
     elif r.put:
-        yield from pick_place_once(ctx, sub, r.tries[sub])
+        if (yield from pick_place_once(ctx, sub, r.tries[sub])):
+            return  # it only tipped a book over (`tip_book`): not a try
     elif sub not in goal and not articulated.is_closed_enough(s.env, sub[1]):  # open, but too short
         going = next(g[1] for g in goal if g[0] == Predicate.IN and articulated.openable(s.env, g[2]) == sub[1])
         yield from drawer_room.make_room(ctx, sub, going)
