@@ -824,6 +824,17 @@ def test_version_22_unwinds_the_arm_after_standing_a_face_down_book():
     assert out.success, out
 
 
+def _watch_held(held: list[str]):
+    """A `tuning_attempt` watch that appends each object the hand starts to hold, in order."""
+    def watch(env, _):
+        def on_step(_):
+            h = Scene(env).holding_any()
+            if h is not None and (not held or held[-1] != h):
+                held.append(h)
+        return on_step
+    return watch
+
+
 @pytest.mark.sim
 def test_version_22_sets_aside_what_takes_a_fingertips_spot_at_a_face_down_books_corners():
     """tunebooks, libero_90 STUDY_SCENE1 (left compartment), init 2, step 63: the book lies on its
@@ -843,13 +854,7 @@ def test_version_22_sets_aside_what_takes_a_fingertips_spot_at_a_face_down_books
         assert face is not None
         assert pinch_blockers(s, "black_book_1", face, {"black_book_1", "desk_caddy_1"}) == ["white_yellow_mug_1"]
     held = []
-
-    def watch(env, policy):
-        def on_step(_):
-            h = Scene(env).holding_any()
-            if h is not None and (not held or held[-1] != h):
-                held.append(h)
-        return on_step
+    watch = _watch_held(held)
 
     out = tuning_attempt("libero_90", task, 92547534, 63, init=2, watch=watch)
     assert held[:1] == ["white_yellow_mug_1"], held  # the mug first, no grasp of the flat book before
@@ -877,13 +882,7 @@ def test_version_23_sets_aside_what_the_tilted_hand_meets_at_a_books_edge():
         assert book is not None
         assert edge_blockers(s, "black_book_1", book, {"black_book_1"}) == ["porcelain_mug_1"]
     held = []
-
-    def watch(env, policy):
-        def on_step(_):
-            h = Scene(env).holding_any()
-            if h is not None and (not held or held[-1] != h):
-                held.append(h)
-        return on_step
+    watch = _watch_held(held)
 
     task = "STUDY_SCENE1_pick_up_the_book_and_place_it_in_the_right_compartment_of_the_caddy"
     out = tuning_attempt("libero_90", task, 1296278284, 187, init=0, watch=watch)

@@ -202,7 +202,8 @@ def in_the_way(r: Round) -> str | None:
     if (face := lying_on_face(s, sub[1])) is not None:
         in_way += pinch_blockers(s, sub[1], face, r.keep)
     # a tilted book is grasped by its top edge or a corner, the hand tilted: what that hand meets
-    elif (book := stand_tilt(s, sub[1])) is not None and tip_way(s, sub[1]) is None:  # (tipped: untouched)
+    # (not one standing upside down that is tipped over instead: no hand closes on it there)
+    elif (book := stand_tilt(s, sub[1])) is not None and tip_way(s, sub[1]) is None:
         in_way += edge_blockers(s, sub[1], book, r.keep)
     block = [b for b in in_way if r.aside[b] < MAX_ASIDE]
     if block:
