@@ -3,6 +3,8 @@ stops with a reason when it cannot (a goal object off the table)."""
 
 from __future__ import annotations
 
+from contextlib import contextmanager
+
 import numpy as np
 import pytest
 
@@ -322,6 +324,17 @@ def tuning_attempt(suite: str, task: str, seed: int, step: int, horizon: int = 5
         return attempt(env, scene, policy, 0, horizon, 8, on_step=None if watch is None else watch(env, policy))
 
 
+@contextmanager
+def tuning_scene(suite: str, task: str, init: int, seed: int, step: int):
+    """The `Scene` of a tuning run's failure scene saved in `tuning_scenes.npz`, restored."""
+    from pipeline.release.experts import restore_scene
+    from pipeline.sim import get_task
+
+    with build_env(get_task(suite, task)) as env:
+        restore_scene(env, tuning_scenes.load(suite, task, init, seed, step))
+        yield Scene(env)
+
+
 @pytest.mark.sim
 def test_a_bowl_under_the_open_drawer_goes_in_before_the_horizon():
     """libero_goal "open the top drawer and put the bowl inside", step 327: the bowl stands
@@ -568,17 +581,13 @@ def test_an_upside_down_book_is_turned_with_the_hand_pointing_away_from_the_base
     not counted as a try, so the face skill's first pinch is its best corner; counted, the
     second corner's pinch met the caddy's wall and the attempt ran out of time)."""
     from pipeline.policies.scripted.recovery.stand_book import PITCH, _turn_way, book_axes
-    from pipeline.release.experts import restore_scene
-    from pipeline.sim import get_task
 
     task = "STUDY_SCENE3_pick_up_the_book_and_place_it_in_the_left_compartment_of_the_caddy"
-    with build_env(get_task("libero_90", task)) as env:
-        restore_scene(env, tuning_scenes.load("libero_90", task, 2, 460143849, 282))
-        s = Scene(env)
+    with tuning_scene("libero_90", task, 2, 460143849, 282) as s:
         ax = book_axes(s, "black_book_1")
         assert ax.up[2] < -0.9  # upside down
         a1, _ = _turn_way(s, ax, 2 * PITCH, PITCH)
-        away = (ax.top_mid - env.robot_base())[:2]
+        away = (ax.top_mid - s.env.robot_base())[:2]
         assert float(a1[:2] @ away) > 0.0, a1  # the grasping hand pitched away from the base
     seen = {}
 
@@ -843,13 +852,9 @@ def test_version_22_sets_aside_what_takes_a_fingertips_spot_at_a_face_down_books
     off it twice before the mug was set aside (version 21: a timeout). The mug, the only
     movable blocker, is now set aside first (`face_book.pinch_blockers`), then the book pinched."""
     from pipeline.policies.scripted.recovery.face_book import lying_on_face, pinch_blockers
-    from pipeline.release.experts import restore_scene
-    from pipeline.sim import get_task
 
     task = "STUDY_SCENE1_pick_up_the_book_and_place_it_in_the_left_compartment_of_the_caddy"
-    with build_env(get_task("libero_90", task)) as env:
-        restore_scene(env, tuning_scenes.load("libero_90", task, 2, 92547534, 63))
-        s = Scene(env)
+    with tuning_scene("libero_90", task, 2, 92547534, 63) as s:
         face = lying_on_face(s, "black_book_1")
         assert face is not None
         assert pinch_blockers(s, "black_book_1", face, {"black_book_1", "desk_caddy_1"}) == ["white_yellow_mug_1"]
@@ -871,13 +876,9 @@ def test_version_23_sets_aside_what_the_tilted_hand_meets_at_a_books_edge():
     first. The same check finds the mug a book leans on in tune26's STUDY_SCENE3 (front
     compartment, init 4, step 100), whose hand knocked it flat (version 22: a timeout)."""
     from pipeline.policies.scripted.recovery.stand_book import edge_blockers, stand_tilt
-    from pipeline.release.experts import restore_scene
-    from pipeline.sim import get_task
 
     leaning = "STUDY_SCENE3_pick_up_the_book_and_place_it_in_the_front_compartment_of_the_caddy"
-    with build_env(get_task("libero_90", leaning)) as env:
-        restore_scene(env, tuning_scenes.load("libero_90", leaning, 4, 72376665, 100))
-        s = Scene(env)
+    with tuning_scene("libero_90", leaning, 4, 72376665, 100) as s:
         book = stand_tilt(s, "black_book_1")
         assert book is not None
         assert edge_blockers(s, "black_book_1", book, {"black_book_1"}) == ["porcelain_mug_1"]

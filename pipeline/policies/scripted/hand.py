@@ -28,3 +28,9 @@ def closing_yaw(direction: np.ndarray) -> float:
     """A top-down hand yaw whose `closing_axis` is the horizontal `direction` (in (-pi, pi];
     yaw + pi closes along it too)."""
     return float(np.arctan2(-direction[0], direction[1]))
+
+
+def closing_yaw_near(direction: np.ndarray, near: float) -> float:
+    """Of the yaws closing along `direction` (either sign, any turn by pi), the one nearest `near`."""
+    base = closing_yaw(direction)
+    return min((base, base - np.pi, base + np.pi), key=lambda y: abs(y - near))

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.policies.scripted.hand import closing_yaw
+from pipeline.policies.scripted.hand import closing_yaw_near
 from pipeline.policies.scripted.motion import CARRY_CLEARANCE, Ctx, Plan, travel
 from pipeline.policies.scripted.placement import region_box
 from pipeline.policies.scripted.primitives import Grip
@@ -25,12 +25,6 @@ from pipeline.policies.scripted.slot import footprint
 STAND_OUT_M = 0.10  # book's footprint centre this far in front of the opening when stood up
 TIP_PUSH_M = 0.10  # how far the fingers push the book's top to tip it
 PUSH_OUT_M = 0.018  # grip site this far outside the opening at the end of the push
-
-
-def _yaw_closing_along(direction: np.ndarray, near: float) -> float:
-    """Hand yaw whose closing axis runs along `direction` (either sign), nearest `near`."""
-    base = closing_yaw(direction)
-    return min((base, base - np.pi, base + np.pi), key=lambda y: abs(y - near))
 
 
 def tip_and_push(ctx: Ctx, obj: str, target: str, into: np.ndarray) -> Plan:
@@ -45,7 +39,7 @@ def tip_and_push(ctx: Ctx, obj: str, target: str, into: np.ndarray) -> Plan:
     # 1. stand it up in front of the opening, thin side towards the shelf
     eef = s.eef()
     theta, _, _, foot = footprint(env.object_corners(obj))
-    yaw = _yaw_closing_along(into, ctx.yaw_hold)
+    yaw = closing_yaw_near(into, ctx.yaw_hold)
     turn = yaw - ctx.yaw_hold
     c, sn = np.cos(turn), np.sin(turn)
     hold = np.array([[c, -sn], [sn, c]]) @ (eef[:2] - foot)
@@ -63,7 +57,7 @@ def tip_and_push(ctx: Ctx, obj: str, target: str, into: np.ndarray) -> Plan:
     yield ctx.move(s.eef() + [0, 0, 0.06], yaw=yaw, tol=0.015, max_steps=30, label="retreat")
 
     # 2. tip it: fingers closed, just on the shelf side of its top, pushed away from the shelf
-    yaw = _yaw_closing_along(across, yaw)
+    yaw = closing_yaw_near(across, yaw)
     ctx.yaw_hold = yaw
     _, _, thin, foot = footprint(env.object_corners(obj))
     top = s.box(obj).hi[2]

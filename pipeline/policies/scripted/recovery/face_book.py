@@ -62,22 +62,22 @@ def lying_on_face(scene: Scene, obj: str) -> BookAxes | None:
     return ax if ax is not None and abs(float(ax.thin[2])) > FACE_UP else None
 
 
-def _level(v: np.ndarray) -> np.ndarray:
+def level(v: np.ndarray) -> np.ndarray:
     h = np.array([v[0], v[1], 0.0])
     return h / max(float(np.linalg.norm(h)), 1e-9)
 
 
 def _corners(scene: Scene, ax: BookAxes) -> list[tuple[np.ndarray, np.ndarray]]:
     """(grip site, closing axis) of the pinch across each of the two top corners."""
-    u = _level(ax.up)
-    side = _level(ax.long)
+    u = level(ax.up)
+    side = level(ax.long)
     half = 0.5 * ax.length
     z = max(float(ax.top_mid[2]), scene.table_height() + TABLE_MARGIN)
     out = []
     for sg in (1.0, -1.0):
         corner = ax.top_mid + side * sg * half
         on_side, on_top = corner - u * CORNER_LEG_M, corner - side * sg * CORNER_LEG_M
-        out.append((np.array([*((on_side + on_top) / 2)[:2], z]), _level(on_side - on_top)))
+        out.append((np.array([*((on_side + on_top) / 2)[:2], z]), level(on_side - on_top)))
     return out
 
 

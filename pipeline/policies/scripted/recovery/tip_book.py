@@ -16,8 +16,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.policies.scripted.hand import closing_yaw
+from pipeline.policies.scripted.hand import closing_yaw_near
 from pipeline.policies.scripted.motion import HAND_CLEARANCE, Ctx, Plan, travel
+from pipeline.policies.scripted.recovery.face_book import level
 from pipeline.policies.scripted.recovery.stand_book import FACES_STAND, BookAxes, book_axes
 from pipeline.policies.scripted.scene import Scene
 
@@ -49,8 +50,7 @@ def tip_way(scene: Scene, obj: str) -> np.ndarray | None:
     ax = upside_down(scene, obj)
     if ax is None:
         return None
-    thin = np.array([ax.thin[0], ax.thin[1], 0.0])
-    thin /= max(float(np.linalg.norm(thin)), 1e-9)
+    thin = level(ax.thin)
     to_base = scene.env.robot_base()[:2] - scene.box(obj).centre[:2]
     ways = sorted((thin, -thin), key=lambda w: -float(w[:2] @ to_base))
     return next((w for w in ways if _free(scene, obj, ax, w)), None)
@@ -58,17 +58,16 @@ def tip_way(scene: Scene, obj: str) -> np.ndarray | None:
 
 def _free(scene: Scene, obj: str, ax: BookAxes, way: np.ndarray) -> bool:
     centre = scene.box(obj).centre
-    along = np.array([ax.long[0], ax.long[1], 0.0])
-    along /= max(float(np.linalg.norm(along)), 1e-9)
+    along = level(ax.long)
     table = scene.table_height()
     lying = [centre[:2] + way[:2] * d + along[:2] * f * ax.length for d in LIE_OUT_M for f in LIE_ACROSS_FRAC]
     if any(scene.support_top(p, 0.005, {obj}) > table + FREE_M for p in lying):
         return False
-    at = _push_start(scene, obj, ax, way)
+    at = _push_start(scene, obj, way)
     return scene.support_top(at[:2], HAND_ROOM_M, {obj}, below=np.inf) < at[2] - 0.01
 
 
-def _push_start(scene: Scene, obj: str, ax: BookAxes, way: np.ndarray) -> np.ndarray:
+def _push_start(scene: Scene, obj: str, way: np.ndarray) -> np.ndarray:
     centre = scene.box(obj).centre
     thick = float(np.ptp(scene.env.object_corners(obj) @ way))
     xy = centre[:2] - way[:2] * (thick / 2 + HAND_OFF_M)
@@ -76,15 +75,12 @@ def _push_start(scene: Scene, obj: str, ax: BookAxes, way: np.ndarray) -> np.nda
 
 
 def tip_over(ctx: Ctx, obj: str, way: np.ndarray) -> Plan:
+    """`way`: from `tip_way`, asked in the same state."""
     s = ctx.scene
-    ax = upside_down(s, obj)
-    if ax is None:
-        return
     ctx.note(tip_book=True)
-    at = _push_start(s, obj, ax, way)
+    at = _push_start(s, obj, way)
     # the closing axis across the push: the closed fingers press along the book's length
-    base = closing_yaw(np.array([-way[1], way[0], 0.0]))
-    yaw = min((base, base - np.pi, base + np.pi), key=lambda y: abs(y - ctx.yaw_hold))
+    yaw = closing_yaw_near(np.array([-way[1], way[0], 0.0]), ctx.yaw_hold)
     # (the fingers close on the way over: `gripper=1.0` throughout)
     over = at + [0.0, 0.0, 0.06]
     yield from travel(ctx, over, yaw, 1.0, s.path_clearance(s.eef(), over, 0.06, set()) + HAND_CLEARANCE)
