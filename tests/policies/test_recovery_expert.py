@@ -927,3 +927,57 @@ def test_version_24_tips_an_upside_down_book_onto_a_face_before_standing_it():
         assert out.success, out
     finally:
         env.close()
+
+
+@pytest.mark.sim
+def test_version_25_pushes_in_a_drawer_whose_front_stops_the_palm_on_its_way_down():
+    """tunewide2, libero_90 KITCHEN_SCENE10 (the pudding into the top drawer), init 1, step
+    155: the pudding stands 7 cm in front of the fully open top drawer. No part of the
+    drawer is over it, but the palm reaches 10 cm along its closing axis: every grasp's hand
+    stopped on the drawer's front 17 cm over the grip site (version 24: the same grasp four
+    times, `retries_exhausted`). The drawer is now pushed in until the palm's way down is
+    clear, the pudding set down far enough out that it stays clear once the drawer is open
+    again, and it goes in."""
+    task = "KITCHEN_SCENE10_put_the_chocolate_pudding_in_the_top_drawer_of_the_cabinet_and_close_it"
+    region = "wooden_cabinet_1_top_region"
+    with tuning_scene("libero_90", task, 1, 494856142, 155) as s:
+        joint = s.env.region(region).joints[0]
+        parts = s.env.joint_part_boxes(joint)
+        assert s.box("chocolate_pudding_1").lo[1] - parts[:, 1, 1].max() > 0.02  # no part of the drawer over it
+        assert checks.overhanging_drawer(s, "chocolate_pudding_1") == region
+        out_before = abs(s.env.joint_position(joint))
+    first_held = []  # how far out the drawer was when the pudding was first held
+
+    def watch(env, _):
+        def on_step(_):
+            if not first_held and Scene(env).holding_any() == "chocolate_pudding_1":
+                first_held.append(abs(env.joint_position(joint)))
+        return on_step
+
+    out = tuning_attempt("libero_90", task, 494856142, 155, init=1, watch=watch)
+    assert first_held and first_held[0] < out_before - 0.04, (first_held, out_before)  # pushed in first
+    assert out.success, out
+
+
+@pytest.mark.sim
+def test_version_25_takes_the_grasp_that_grazes_a_fixture_least_when_none_is_clear():
+    """tunewide2, libero_goal "put the wine bottle on the rack", init 2, step 57: the bottle
+    lies between the rack and the cabinet, a bowl beside it. With the bowl away no grasp's
+    hand is clear: the rays' choice goes 2 cm into the rack, the grasps slid along the bottle
+    clear of the rack meet the cabinet's edge by a few mm, and no push frees one. Version 24
+    fell back on the rays' choice and stopped on the rack four times (`retries_exhausted`);
+    `nudge.palm_graze` takes the slid grasp that grazes a fixture least, and the bottle goes
+    onto the rack."""
+    from pipeline.policies.scripted.placement import destination
+    from pipeline.policies.scripted.recovery.nudge import palm_block, palm_clear, palm_graze, push_plan
+    from tests.policies.failure_states import set_pose
+
+    task, bottle = "put_the_wine_bottle_on_the_rack", "wine_bottle_1"
+    with tuning_scene("libero_goal", task, 2, 343094286, 57) as s:
+        set_pose(s.env, "akita_black_bowl_1", [0.3, 0.3, s.table_height() + 0.05])  # out of the way
+        dest = destination(s, bottle, "wine_rack_1_top_region")
+        assert palm_clear(s, bottle, dest, 1) is None and push_plan(s, bottle, dest) is None
+        k, g = palm_graze(s, bottle, dest, 1)
+        assert palm_block(s, bottle, g) == ["wooden_cabinet_1"]  # the rack clear, the cabinet grazed
+    out = tuning_attempt("libero_goal", task, 343094286, 57, init=2)
+    assert out.success, out

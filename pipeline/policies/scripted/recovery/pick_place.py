@@ -27,7 +27,7 @@ from pipeline.policies.scripted.primitives import Primitive
 from pipeline.policies.scripted.recovery import checks
 from pipeline.policies.scripted.recovery.face_book import lying_on_face, stand_from_face
 from pipeline.policies.scripted.recovery.long_grasp import lying_long, slide_clear
-from pipeline.policies.scripted.recovery.nudge import palm_clear, push, push_plan
+from pipeline.policies.scripted.recovery.nudge import palm_clear, palm_graze, push, push_plan
 from pipeline.policies.scripted.recovery.lying_cup import grasp_by_handle, lying_handle_grasp, place_by_handle
 from pipeline.policies.scripted.recovery.near_grasp import pitched_approach, pitched_grasp
 from pipeline.policies.scripted.recovery.stand_book import quarter_turn, slot_size, stand_tilt, stand_up, turn_first
@@ -176,12 +176,15 @@ def pick_place_once(ctx: Ctx, conjunct: tuple[str, ...], attempt: int) -> Genera
             yield from free_hand_for(ctx, obj)
             dest = destination(ctx.scene, obj, target)
             # a candidate whose fingers (and palm) land clear of other objects (they would be
-            # clamped too); none: push the object clear of its neighbour first (nudge.py)
+            # clamped too); none: push the object clear of its neighbour first, or else take
+            # the one that grazes a fixture least (nudge.py)
             found = palm_clear(s, obj, dest, attempt)
             if found is None and (shove := push_plan(s, obj, dest)) is not None:
                 yield from push(ctx, obj, shove)
                 dest = destination(ctx.scene, obj, target)
                 found = palm_clear(s, obj, dest, attempt)
+            if found is None:
+                found = palm_graze(s, obj, dest, attempt)
             if found is None:
                 choice = checks.clear_grasp_choice(s, obj, dest, attempt)
                 found = choice, slide_clear(s, obj, plan_grasp(s, obj, dest, choice))

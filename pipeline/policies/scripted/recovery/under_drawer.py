@@ -18,6 +18,7 @@ from pipeline.policies.scripted.articulated import FINGER_HALF, handle_box, open
 from pipeline.policies.scripted.drawer_room import drag_out
 from pipeline.policies.scripted.goal import Conjunct, Predicate
 from pipeline.policies.scripted.grasps import plan_grasp
+from pipeline.policies.scripted.hand import Grasp
 from pipeline.policies.scripted.motion import Ctx, Plan, grasp, place_at, travel
 from pipeline.policies.scripted.notes import Outcome
 from pipeline.policies.scripted.recovery import checks
@@ -47,14 +48,16 @@ def pull_side(env, joint: str) -> tuple[int, float]:
     return k, float(np.sign(pull[k]))
 
 
-def uncover_distance(ctx: Ctx, obj: str, joint: str) -> float:
-    """How far (m) the drawer must go in so that its parts no longer overhang `obj` (+pad)."""
+def uncover_distance(ctx: Ctx, obj: str, joint: str, g: Grasp) -> float:
+    """How far (m) the drawer must go in so that its parts no longer overhang `obj`, nor the
+    palm's way down to grip `g` (+pad)."""
     s = ctx.scene
     k, d = pull_side(s.env, joint)
     boxes = s.env.joint_part_boxes(joint)
     front = float(boxes[:, 1, k].max()) if d > 0 else float(-boxes[:, 0, k].min())
-    edge = float(s.box(obj).lo[k]) if d > 0 else float(-s.box(obj).hi[k])
-    return max(0.0, front - edge + HAND_PAD_M)
+    palm = checks.palm_footprint(g)
+    edge = min(s.box(obj).lo[k], palm[0, k]) if d > 0 else -max(s.box(obj).hi[k], palm[1, k])
+    return max(0.0, front - float(edge) + HAND_PAD_M)
 
 
 def away_from_drawer(s, obj: str, joint: str, attempt: int, candidates: int = 6) -> int:
@@ -68,9 +71,18 @@ def away_from_drawer(s, obj: str, joint: str, attempt: int, candidates: int = 6)
     return ranked[attempt % candidates]
 
 
-def beyond_sweep(s, obj: str, joint: str, sweep: np.ndarray) -> np.ndarray | None:
+def palm_overhang(s, obj: str, joint: str, g: Grasp) -> float:
+    """How far (m) the palm of grip `g` reaches past `obj`'s edge toward the drawer of `joint`."""
+    k, d = pull_side(s.env, joint)
+    palm, box = checks.palm_footprint(g), s.box(obj)
+    return max(0.0, float(box.lo[k] - palm[0, k]) if d > 0 else float(palm[1, k] - box.hi[k]))
+
+
+def beyond_sweep(s, obj: str, joint: str, sweep: np.ndarray, overhang: float = 0.0) -> np.ndarray | None:
     """A spot for the object's body just beyond the fully opened drawer (moved out along the
-    drawer's pull, 6 to 10 cm clear of it, and across it up to ACROSS_M either way): the
+    drawer's pull, 6 to 10 cm clear of it, and the palm's `overhang` past the object's edge
+    more: a pudding set down 6 cm out was under the palm's way down again once the drawer
+    was open, measured; and across it up to ACROSS_M either way): the
     short way out of its sweep, close to where it goes in next. Of the spots clear of
     everything, the nearest the robot base (lowering an object far out is slow: measured,
     60 steps 0.81 m out), none beyond AWAY_MAX_M from it. None when none is clear (then
@@ -86,7 +98,8 @@ def beyond_sweep(s, obj: str, joint: str, sweep: np.ndarray) -> np.ndarray | Non
     for gap in (0.06, 0.08, 0.1):  # (`checks.under_sweep` wants it 5 cm clear)
         for across in np.arange(-ACROSS_M, ACROSS_M + 1e-9, 0.03):
             shift = np.zeros(2)
-            shift[k] = (sweep[1, k] + gap - box.lo[k]) if d > 0 else (sweep[0, k] - gap - box.hi[k])
+            out = gap + overhang
+            shift[k] = (sweep[1, k] + out - box.lo[k]) if d > 0 else (sweep[0, k] - out - box.hi[k])
             shift[1 - k] = across
             lo, hi = box.lo[:2] + shift - 0.01, box.hi[:2] + shift + 0.01
             if any(np.all(b[0, :2] <= hi) and np.all(lo <= b[1, :2]) for b in others):
@@ -126,7 +139,10 @@ def clear_from_under(ctx: Ctx, obj: str, region: str, attempt: int = 0) -> Plan:
     fr = env.joint_frame(joint)
     sign = open_sign(fr.range)
     out = sign * fr.qpos  # how far out it is now
-    dist = min(uncover_distance(ctx, obj, joint), out)
+    choice = away_from_drawer(s, obj, joint, attempt)
+    g = plan_grasp(s, obj, None, choice)
+    overhang = palm_overhang(s, obj, joint, g)
+    dist = min(uncover_distance(ctx, obj, joint, g), out)
     ctx.begin("close", Conjunct(Predicate.CLOSE, region), region)
     yield from push_in(ctx, joint, dist)
     covered = checks.overhanging_drawer(s, obj, pad=0.0) is not None
@@ -139,11 +155,10 @@ def clear_from_under(ctx: Ctx, obj: str, region: str, attempt: int = 0) -> Plan:
     # into the drawer next: its own place does not repel the spot; not farther out than
     # `free_spot` looks: measured, lowering it 0.74 m out took 60 steps). The fist holds
     # nothing and opens on the way: no `free_hand` (a separate opening costs 8-12 steps)
-    yield from grasp(ctx, obj, None, choice=away_from_drawer(s, obj, joint, attempt),
-                     hover_m=0.08 + 0.03 * min(attempt, 2))
+    yield from grasp(ctx, obj, None, choice=choice, hover_m=0.08 + 0.03 * min(attempt, 2))
     if checks.held(s) != obj:
         return
-    spot = beyond_sweep(s, obj, joint, sweep)
+    spot = beyond_sweep(s, obj, joint, sweep, overhang)
     if spot is None:
         spot = checks.free_spot(s, obj, goal_points(ctx, obj), [sweep])
     if spot is None:
