@@ -6,13 +6,16 @@ retry shift of `variation.RetryNoise`. A book that leans or lies tilted is picke
 top edge with a tilted hand and turned upright in the hand (stand_book.py); one lying on its
 face is pinched by a top corner, turned upright and set down standing (face_book.py); one
 standing upside down is first pushed over onto a face (tip_book.py). An object no
-grasp reaches clear of its neighbours is first pushed clear (nudge.py). The planner calls
-it again from the live state.
+grasp reaches clear of its neighbours is first pushed clear, or else grasped where the
+hand grazes a fixture least (nudge.py). `take` gets the object into the hand (or says why
+it did not), `pick_place_once` places it. The planner calls it again from the live state.
 """
 
 from __future__ import annotations
 
 from collections.abc import Generator
+from dataclasses import dataclass
+from enum import Enum
 
 import numpy as np
 
@@ -30,7 +33,8 @@ from pipeline.policies.scripted.recovery.long_grasp import lying_long, slide_cle
 from pipeline.policies.scripted.recovery.nudge import palm_clear, palm_graze, push, push_plan
 from pipeline.policies.scripted.recovery.lying_cup import grasp_by_handle, lying_handle_grasp, place_by_handle
 from pipeline.policies.scripted.recovery.near_grasp import pitched_approach, pitched_grasp
-from pipeline.policies.scripted.recovery.stand_book import quarter_turn, slot_size, stand_tilt, stand_up, turn_first
+from pipeline.policies.scripted.recovery.stand_book import (BookAxes, quarter_turn, slot_size, stand_tilt, stand_up,
+                                                            turn_first)
 from pipeline.policies.scripted.recovery.tip_book import tip_over, tip_way, upside_down
 from pipeline.policies.scripted.skills import place
 from pipeline.policies.scripted.slot import place_in_slot, slot_alignment
@@ -136,71 +140,91 @@ def free_hand_for(ctx: Ctx, obj: str) -> Plan:
         yield from free_hand(ctx)
 
 
+@dataclass(frozen=True)
+class Held:
+    """How an attempt came to hold its object: by a lying mug's handle (set down as held),
+    and the book it stood up in the hand (slotted), if any."""
+
+    by_handle: bool = False
+    book: BookAxes | None = None
+
+
+class Ended(Enum):
+    """Why an attempt ended before holding its object."""
+
+    PREPARED = "prepared"  # it stood or turned a book: the next attempt grasps it as it is
+    TIPPED = "tipped"  # it only tipped an upside-down book onto a face: not a try
+    MISSED = "missed"  # the grasp missed
+
+
+def take(ctx: Ctx, obj: str, target: str, attempt: int) -> Generator[Primitive, None, Held | Ended]:
+    """Get `obj` into the hand, by the way its pose calls for (see the module's doc)."""
+    s = ctx.scene
+    if carried(s, obj, checks.held(s)):
+        return Held()
+    face = lying_on_face(s, obj)
+    if face is not None and (yield from stand_from_face(ctx, obj, face, attempt)):
+        return Ended.PREPARED  # standing (or not)
+    if (way := tip_way(s, obj)) is not None:  # upside down: onto a face, stood up from there
+        yield from tip_over(ctx, obj, way)
+        # not a try when it tipped: the face skill's first pinch (attempt 0) is its best
+        # corner; counted, the tipped book got the second, crowded by the caddy's wall,
+        # and the pinch missed (measured: a tuning scene, ~100 steps, a timeout)
+        return Ended.TIPPED if upside_down(s, obj) is None else Ended.PREPARED
+    book = stand_tilt(s, obj)
+    turn = None if book is None else turn_first(s, book)
+    if turn is not None:
+        yield from quarter_turn(ctx, obj, book, *turn)  # nearer standing: the next attempt goes on
+        return Ended.PREPARED
+    handle = lying_handle_grasp(s, obj) if book is None else None  # a mug on its side: by its handle
+    by_handle = handle is not None
+    if book is not None:
+        yield from stand_up(ctx, obj, book)
+    elif by_handle:
+        yield from free_hand_for(ctx, obj)
+        yield from grasp_by_handle(ctx, obj, handle, hover_m=0.08 + 0.03 * min(attempt, 2))
+    else:
+        yield from free_hand_for(ctx, obj)
+        dest = destination(ctx.scene, obj, target)
+        # a candidate whose fingers (and palm) land clear of other objects (they would be
+        # clamped too); none: push the object clear of its neighbour first, or else take
+        # the one that grazes a fixture least (nudge.py)
+        found = palm_clear(s, obj, dest, attempt)
+        if found is None and (shove := push_plan(s, obj, dest)) is not None:
+            yield from push(ctx, obj, shove)
+            dest = destination(ctx.scene, obj, target)
+            found = palm_clear(s, obj, dest, attempt)
+        if found is None:
+            found = palm_graze(s, obj, dest, attempt)
+        if found is None:
+            choice = checks.clear_grasp_choice(s, obj, dest, attempt)
+            found = choice, slide_clear(s, obj, plan_grasp(s, obj, dest, choice))
+        pitched = pitched_approach(s, found[1]) if lying_long(s, obj) else None
+        if pitched is not None:  # beside the base: fingertips in, wrist out (near_grasp.py)
+            by_handle = True  # ... and set down as held, like a mug by its handle: levelled,
+            # the hand would tilt the object by the pitch in its fingers
+            yield from pitched_grasp(ctx, obj, found[1], pitched)
+        else:
+            yield from grasp(ctx, obj, dest, choice=found[0], g=found[1],
+                             hover_m=hover_height(s, found[1], attempt), turn_tol=TURN_TOL)
+    if not carried(s, obj, checks.held(s)):
+        ctx.events.append(Note(Outcome.MISSED_GRASP, obj))
+        return Ended.MISSED
+    return Held(by_handle, book)
+
+
 def pick_place_once(ctx: Ctx, conjunct: tuple[str, ...], attempt: int) -> Generator[Primitive, None, bool]:
     """One attempt; returns True when it only tipped an upside-down book onto a face (a
     preparation the planner does not count as a try), False otherwise."""
     _, obj, target = conjunct
     s = ctx.scene
     ctx.begin("pick_place", conjunct, obj, target)
-    by_handle = False
-    book = None  # a book this attempt stands up in the hand
-    if not carried(s, obj, checks.held(s)):
-        face = lying_on_face(s, obj)
-        if face is not None and (yield from stand_from_face(ctx, obj, face, attempt)):
-            if ctx.truth is not None:  # standing (or not): the next attempt grasps it as it is
-                ctx.truth.end_hand(obj, False)
-            return False
-        if (way := tip_way(s, obj)) is not None:  # upside down: onto a face, stood up from there
-            yield from tip_over(ctx, obj, way)
-            if ctx.truth is not None:
-                ctx.truth.end_hand(obj, False)
-            # not a try when it tipped: the face skill's first pinch (attempt 0) is its best
-            # corner; counted, the tipped book got the second, crowded by the caddy's wall,
-            # and the pinch missed (measured: a tuning scene, ~100 steps, a timeout)
-            return upside_down(s, obj) is None
-        book = stand_tilt(s, obj)
-        turn = None if book is None else turn_first(s, book)
-        if turn is not None:
-            yield from quarter_turn(ctx, obj, book, *turn)  # nearer standing: the next attempt goes on
-            if ctx.truth is not None:
-                ctx.truth.end_hand(obj, False)
-            return False
-        handle = lying_handle_grasp(s, obj) if book is None else None  # a mug on its side: by its handle
-        by_handle = handle is not None
-        if book is not None:
-            yield from stand_up(ctx, obj, book)
-        elif by_handle:
-            yield from free_hand_for(ctx, obj)
-            yield from grasp_by_handle(ctx, obj, handle, hover_m=0.08 + 0.03 * min(attempt, 2))
-        else:
-            yield from free_hand_for(ctx, obj)
-            dest = destination(ctx.scene, obj, target)
-            # a candidate whose fingers (and palm) land clear of other objects (they would be
-            # clamped too); none: push the object clear of its neighbour first, or else take
-            # the one that grazes a fixture least (nudge.py)
-            found = palm_clear(s, obj, dest, attempt)
-            if found is None and (shove := push_plan(s, obj, dest)) is not None:
-                yield from push(ctx, obj, shove)
-                dest = destination(ctx.scene, obj, target)
-                found = palm_clear(s, obj, dest, attempt)
-            if found is None:
-                found = palm_graze(s, obj, dest, attempt)
-            if found is None:
-                choice = checks.clear_grasp_choice(s, obj, dest, attempt)
-                found = choice, slide_clear(s, obj, plan_grasp(s, obj, dest, choice))
-            pitched = pitched_approach(s, found[1]) if lying_long(s, obj) else None
-            if pitched is not None:  # beside the base: fingertips in, wrist out (near_grasp.py)
-                by_handle = True  # ... and set down as held, like a mug by its handle: levelled,
-                # the hand would tilt the object by the pitch in its fingers
-                yield from pitched_grasp(ctx, obj, found[1], pitched)
-            else:
-                yield from grasp(ctx, obj, dest, choice=found[0], g=found[1],
-                                 hover_m=hover_height(s, found[1], attempt), turn_tol=TURN_TOL)
-        if not carried(s, obj, checks.held(s)):
-            ctx.events.append(Note(Outcome.MISSED_GRASP, obj))
-            if ctx.truth is not None:
-                ctx.truth.end_hand(obj, False)
-            return False
+    got = yield from take(ctx, obj, target, attempt)
+    if isinstance(got, Ended):
+        if ctx.truth is not None:
+            ctx.truth.end_hand(obj, False)
+        return got is Ended.TIPPED
+    by_handle, book = got.by_handle, got.book
     if by_handle:
         yield from place_by_handle(ctx, obj, target)
     elif lying_long(s, obj) and s.env.is_region(target) and not s.env.region(target).joints:
