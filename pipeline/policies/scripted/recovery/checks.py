@@ -27,6 +27,10 @@ ELBOW_LOCKED = 0.06  # ... and this close it is locked: only tilting the hand be
 WRIST = slice(4, 7)  # the wrist joints (5, 6, 7)
 PALM_HALF_M = 0.03  # the palm's half width across its closing axis (its box: 3.2 cm)
 PALM_REACH_M = 0.10  # ... and its half length along it, from the grip site (its box: 20.8 cm)
+# a drawer the palm's footprint meets by less than this lets the hand down: its rounded end
+# glances off (measured: a pudding whose palm met the handle's box by 1.3 cm went down past
+# it; one whose palm met it by 4.2 cm, the front wall by 1.1 cm, stopped on the front)
+PALM_MEETS_M = 0.02
 SAFE_Z = 0.16  # grip site above the table top from which any approach may start
 # comfortable region of the grip site (x, y), relative to the robot base
 HOME_XY = np.array([0.45, 0.0])
@@ -286,9 +290,9 @@ def overhanging_drawer(scene: Scene, obj: str, pad: float = 0.02, tries: int = 6
     around the object, so `pad` widens its footprint; it reaches 10 cm along its closing
     axis, so a drawer's front a few cm out from the object stops it on the way down
     (measured: a pudding 7 cm in front of KITCHEN_SCENE10's open top drawer, the hand on
-    the drawer's front 17 cm over the grip site, five times). No grasp reaches under a drawer
-    whose floor is a hand's height over the object: the forearm comes down onto the drawer
-    (see `under_drawer`)."""
+    the drawer's front 17 cm over the grip site, five times; by less than PALM_MEETS_M it
+    glances off). No grasp reaches under a drawer whose floor is a hand's height over the
+    object: the forearm comes down onto the drawer (see `under_drawer`)."""
     b = scene.box(obj)
     ob = np.array([b.lo, b.hi])
     palms = None
@@ -311,7 +315,7 @@ def overhanging_drawer(scene: Scene, obj: str, pad: float = 0.02, tries: int = 6
             return name
         if palms is None:
             palms = [palm_footprint(plan_grasp(scene, obj, None, k)) for k in range(tries)]
-        if all(_overlap(now, p) and not _overlap(shut, p) for p in palms):
+        if all(_overlap(now, p, -PALM_MEETS_M) and not _overlap(shut, p) for p in palms):
             return name
     return None
 

@@ -48,16 +48,24 @@ def pull_side(env, joint: str) -> tuple[int, float]:
     return k, float(np.sign(pull[k]))
 
 
+def palm_overhang(s, obj: str, joint: str, g: Grasp) -> float:
+    """How far (m) the palm of grip `g` reaches past `obj`'s edge toward the drawer of
+    `joint`, less what a drawer may meet of it (`checks.PALM_MEETS_M`)."""
+    k, d = pull_side(s.env, joint)
+    palm, box = checks.palm_footprint(g), s.box(obj)
+    past = float(box.lo[k] - palm[0, k]) if d > 0 else float(palm[1, k] - box.hi[k])
+    return max(0.0, past - checks.PALM_MEETS_M)
+
+
 def uncover_distance(ctx: Ctx, obj: str, joint: str, g: Grasp) -> float:
-    """How far (m) the drawer must go in so that its parts no longer overhang `obj`, nor the
-    palm's way down to grip `g` (+pad)."""
+    """How far (m) the drawer must go in so that its parts no longer overhang `obj` (+pad),
+    nor meet the palm's way down to grip `g` by `checks.PALM_MEETS_M` or more."""
     s = ctx.scene
     k, d = pull_side(s.env, joint)
     boxes = s.env.joint_part_boxes(joint)
     front = float(boxes[:, 1, k].max()) if d > 0 else float(-boxes[:, 0, k].min())
-    palm = checks.palm_footprint(g)
-    edge = min(s.box(obj).lo[k], palm[0, k]) if d > 0 else -max(s.box(obj).hi[k], palm[1, k])
-    return max(0.0, front - float(edge) + HAND_PAD_M)
+    edge = float(s.box(obj).lo[k]) if d > 0 else float(-s.box(obj).hi[k])
+    return max(0.0, front - edge + palm_overhang(s, obj, joint, g) + HAND_PAD_M)
 
 
 def away_from_drawer(s, obj: str, joint: str, attempt: int, candidates: int = 6) -> int:
@@ -71,23 +79,16 @@ def away_from_drawer(s, obj: str, joint: str, attempt: int, candidates: int = 6)
     return ranked[attempt % candidates]
 
 
-def palm_overhang(s, obj: str, joint: str, g: Grasp) -> float:
-    """How far (m) the palm of grip `g` reaches past `obj`'s edge toward the drawer of `joint`."""
-    k, d = pull_side(s.env, joint)
-    palm, box = checks.palm_footprint(g), s.box(obj)
-    return max(0.0, float(box.lo[k] - palm[0, k]) if d > 0 else float(palm[1, k] - box.hi[k]))
-
-
 def beyond_sweep(s, obj: str, joint: str, sweep: np.ndarray, overhang: float = 0.0) -> np.ndarray | None:
     """A spot for the object's body just beyond the fully opened drawer (moved out along the
-    drawer's pull, 6 to 10 cm clear of it, and the palm's `overhang` past the object's edge
-    more: a pudding set down 6 cm out was under the palm's way down again once the drawer
-    was open, measured; and across it up to ACROSS_M either way): the
-    short way out of its sweep, close to where it goes in next. Of the spots clear of
-    everything, the nearest the robot base (lowering an object far out is slow: measured,
-    60 steps 0.81 m out), none beyond AWAY_MAX_M from it. None when none is clear (then
-    `free_spot`, whose spots lie farther from the drawer: measured, libero_goal's bowl
-    0.33 m off to the side cost ~50 steps of carrying there and back)."""
+    drawer's pull, 6 to 10 cm clear of it and `palm_overhang` more: a pudding set down 6 cm
+    out had the palm's way down under the drawer again once it was open, measured; and
+    across it up to ACROSS_M either way): the short way out of its sweep, close to where it
+    goes in next. Of the spots clear of everything, the nearest the robot base (lowering an
+    object far out is slow: measured, 60 steps 0.81 m out), none beyond AWAY_MAX_M from it.
+    None when none is clear (then `free_spot`, whose spots lie farther from the drawer:
+    measured, libero_goal's bowl 0.33 m off to the side cost ~50 steps of carrying there
+    and back)."""
     k, d = pull_side(s.env, joint)
     box = s.box(obj)
     body = s.env.object_pose(obj)[0][:2]
@@ -139,8 +140,7 @@ def clear_from_under(ctx: Ctx, obj: str, region: str, attempt: int = 0) -> Plan:
     fr = env.joint_frame(joint)
     sign = open_sign(fr.range)
     out = sign * fr.qpos  # how far out it is now
-    choice = away_from_drawer(s, obj, joint, attempt)
-    g = plan_grasp(s, obj, None, choice)
+    g = plan_grasp(s, obj, None, away_from_drawer(s, obj, joint, attempt))  # (as it stands now)
     overhang = palm_overhang(s, obj, joint, g)
     dist = min(uncover_distance(ctx, obj, joint, g), out)
     ctx.begin("close", Conjunct(Predicate.CLOSE, region), region)
@@ -155,7 +155,8 @@ def clear_from_under(ctx: Ctx, obj: str, region: str, attempt: int = 0) -> Plan:
     # into the drawer next: its own place does not repel the spot; not farther out than
     # `free_spot` looks: measured, lowering it 0.74 m out took 60 steps). The fist holds
     # nothing and opens on the way: no `free_hand` (a separate opening costs 8-12 steps)
-    yield from grasp(ctx, obj, None, choice=choice, hover_m=0.08 + 0.03 * min(attempt, 2))
+    yield from grasp(ctx, obj, None, choice=away_from_drawer(s, obj, joint, attempt),
+                     hover_m=0.08 + 0.03 * min(attempt, 2))
     if checks.held(s) != obj:
         return
     spot = beyond_sweep(s, obj, joint, sweep, overhang)
