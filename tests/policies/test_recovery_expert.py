@@ -955,7 +955,7 @@ def test_version_25_pushes_in_a_drawer_whose_front_stops_the_palm_on_its_way_dow
         return on_step
 
     out = tuning_attempt("libero_90", task, 494856142, 155, init=1, watch=watch)
-    assert first_held and first_held[0] < out_before - 0.04, (first_held, out_before)  # pushed in first
+    assert first_held and first_held[0] < out_before - 0.03, (first_held, out_before)  # pushed in first
     assert out.success, out
 
 
@@ -980,4 +980,28 @@ def test_version_25_takes_the_grasp_that_grazes_a_fixture_least_when_none_is_cle
         k, g = palm_graze(s, bottle, dest, 1)
         assert palm_block(s, bottle, g) == ["wooden_cabinet_1"]  # the rack clear, the cabinet grazed
     out = tuning_attempt("libero_goal", task, 343094286, 57, init=2)
+    assert out.success, out
+
+
+@pytest.mark.sim
+def test_version_25_leaves_a_bowl_beside_the_low_drawers_sweep_where_a_grasp_stays_clear():
+    """tunebooks, libero_10 KITCHEN_SCENE4 (the bowl into the bottom drawer), init 3, step 55:
+    the bowl stands 2.5 cm before the shut bottom drawer's sweep, the wine rack behind it.
+    The drawer is low (its floor below the bowl's rim), so version 24 set the bowl aside
+    before opening: no free spot near, it was carried 33 cm off and back and the drawer was
+    still to close at the horizon (a timeout). Beside the sweep, with grasps whose palm
+    comes down clear of the opened drawer, it now stays (`checks.sweep_spares`), and the
+    drawer opens, the bowl goes in and the drawer closes."""
+    from pipeline.policies.scripted import articulated
+    from pipeline.policies.scripted.grasps import plan_grasp
+
+    task = "KITCHEN_SCENE4_put_the_black_bowl_in_the_bottom_drawer_of_the_cabinet_and_close_it"
+    with tuning_scene("libero_10", task, 3, 1471476559, 55) as s:
+        joint = articulated.part_joint(s.env, "white_cabinet_1_bottom_region")
+        sweep = checks.drawer_sweep(s, joint)
+        assert checks.under_sweep(s, "akita_black_bowl_1", sweep)  # within a hand's reach of it
+        assert checks.sweep_spares(s, "akita_black_bowl_1", joint, plan_grasp(s, "akita_black_bowl_1"))
+    held = []
+    out = tuning_attempt("libero_10", task, 1471476559, 55, init=3, watch=_watch_held(held))
+    assert held == ["akita_black_bowl_1"], held  # held once: straight into the drawer, not set aside first
     assert out.success, out

@@ -31,6 +31,11 @@ PALM_REACH_M = 0.10  # ... and its half length along it, from the grip site (its
 # glances off (measured: a pudding whose palm met the handle's box by 1.3 cm went down past
 # it; one whose palm met it by 4.2 cm, the front wall by 1.1 cm, stopped on the front)
 PALM_MEETS_M = 0.02
+# an object's body this far beside a drawer's sweep is left where it is when a grasp's palm
+# comes down clear of the opened drawer (a bowl 2.5 cm before KITCHEN_SCENE4's low bottom
+# drawer was carried 33 cm off and back, ~120 steps; measured, a tuning scene)
+SWEEP_BODY_PAD_M = 0.01
+GRASP_TRIES = 6  # grasp candidates looked at
 SAFE_Z = 0.16  # grip site above the table top from which any approach may start
 # comfortable region of the grip site (x, y), relative to the robot base
 HOME_XY = np.array([0.45, 0.0])
@@ -350,14 +355,22 @@ HAND_HEIGHT_M = 0.15  # grip site to the top of the hand coming down on a grasp
 
 
 def sweep_spares(scene: Scene, obj: str, joint: str, grasp) -> bool:
-    """Opening the drawer of slide `joint` leaves `obj` alone and graspable by `grasp`: its
-    floor passes over the object's top clear, and the opened drawer is either a hand's
+    """Opening the drawer of slide `joint` leaves `obj` alone and graspable by `grasp`: the
+    object stands beside the sweep and some grasp's palm comes down clear of the opened
+    drawer (SWEEP_BODY_PAD_M); or the drawer's floor passes over the object's top clear,
+    and the opened drawer is either a hand's
     height over the grasp or clear of where the palm and the object are (see `grasp_blockers`
     for the palm). `under_sweep` pads the object by a hand's reach; a bowl beside a cabinet
     whose open drawer ended 3 cm before it, 10 cm over its rim, was set aside (~160 steps)."""
     sweep = drawer_sweep(scene, joint)
     b = scene.box(obj)
-    if sweep is None or sweep[0, 2] < b.hi[2] + FLOOR_CLEAR_M:
+    if sweep is None:
+        return False
+    if not _overlap(np.array([b.lo, b.hi]), sweep, pad=SWEEP_BODY_PAD_M) and any(
+            not _overlap(palm_footprint(plan_grasp(scene, obj, None, k)), drawer_opened(scene, joint))
+            for k in range(GRASP_TRIES)):
+        return True
+    if sweep[0, 2] < b.hi[2] + FLOOR_CLEAR_M:
         return False
     opened = drawer_opened(scene, joint)
     if opened[0, 2] > grasp.pos[2] + HAND_HEIGHT_M:
