@@ -977,7 +977,7 @@ def test_version_25_takes_the_grasp_that_grazes_a_fixture_least_when_none_is_cle
         set_pose(s.env, "akita_black_bowl_1", [0.3, 0.3, s.table_height() + 0.05])  # out of the way
         dest = destination(s, bottle, "wine_rack_1_top_region")
         assert palm_clear(s, bottle, dest, 1) is None and push_plan(s, bottle, dest) is None
-        k, g = palm_graze(s, bottle, dest, 1)
+        _, g = palm_graze(s, bottle, dest, 1)
         assert palm_block(s, bottle, g) == ["wooden_cabinet_1"]  # the rack clear, the cabinet grazed
     out = tuning_attempt("libero_goal", task, 343094286, 57, init=2)
     assert out.success, out

@@ -27,9 +27,11 @@ ELBOW_LOCKED = 0.06  # ... and this close it is locked: only tilting the hand be
 WRIST = slice(4, 7)  # the wrist joints (5, 6, 7)
 PALM_HALF_M = 0.03  # the palm's half width across its closing axis (its box: 3.2 cm)
 PALM_REACH_M = 0.10  # ... and its half length along it, from the grip site (its box: 20.8 cm)
-# a drawer the palm's footprint meets by less than this lets the hand down: its rounded end
-# glances off (measured: a pudding whose palm met the handle's box by 1.3 cm went down past
-# it; one whose palm met it by 4.2 cm, the front wall by 1.1 cm, stopped on the front)
+# a drawer the palm's footprint meets by less than this is taken to let the hand down, its
+# rounded end glancing off (measured: a pudding whose palm met the handle's box by 1.3 cm
+# went down past it; one that met it by 4.2 cm, the front wall by 1.1 cm, stopped on the
+# front). Not a clean line: another met the handle's box by 1.1 cm and stopped on it; the
+# world-aligned footprint cannot tell the two apart
 PALM_MEETS_M = 0.02
 # an object's body this far beside a drawer's sweep is left where it is when a grasp's palm
 # comes down clear of the opened drawer (a bowl 2.5 cm before KITCHEN_SCENE4's low bottom
@@ -288,14 +290,14 @@ def palm_footprint(g: Grasp) -> np.ndarray:
     return np.array([g.pos - half, g.pos + half])
 
 
-def overhanging_drawer(scene: Scene, obj: str, pad: float = 0.02, tries: int = 6) -> str | None:
+def overhanging_drawer(scene: Scene, obj: str, pad: float = 0.02, tries: int = GRASP_TRIES) -> str | None:
     """The region of an open drawer that overhangs `obj` (a bowl left under the top drawer
     it was to go into), or the way down to it (the palm of each of its first `tries` grasp
     candidates), when closing the drawer would uncover it; else None. The palm comes down
     around the object, so `pad` widens its footprint; it reaches 10 cm along its closing
     axis, so a drawer's front a few cm out from the object stops it on the way down
     (measured: a pudding 7 cm in front of KITCHEN_SCENE10's open top drawer, the hand on
-    the drawer's front 17 cm over the grip site, five times; by less than PALM_MEETS_M it
+    the drawer's front 17 cm over the grip site, four times; by less than PALM_MEETS_M it
     glances off). No grasp reaches under a drawer whose floor is a hand's height over the
     object: the forearm comes down onto the drawer (see `under_drawer`)."""
     b = scene.box(obj)
@@ -357,11 +359,11 @@ HAND_HEIGHT_M = 0.15  # grip site to the top of the hand coming down on a grasp
 def sweep_spares(scene: Scene, obj: str, joint: str, grasp) -> bool:
     """Opening the drawer of slide `joint` leaves `obj` alone and graspable by `grasp`: the
     object stands beside the sweep and some grasp's palm comes down clear of the opened
-    drawer (SWEEP_BODY_PAD_M); or the drawer's floor passes over the object's top clear,
-    and the opened drawer is either a hand's
-    height over the grasp or clear of where the palm and the object are (see `grasp_blockers`
-    for the palm). `under_sweep` pads the object by a hand's reach; a bowl beside a cabinet
-    whose open drawer ended 3 cm before it, 10 cm over its rim, was set aside (~160 steps)."""
+    drawer (SWEEP_BODY_PAD_M); or the drawer's floor passes over the object's top clear, and
+    the opened drawer is either a hand's height over the grasp or clear of where the palm and
+    the object are (see `grasp_blockers` for the palm). `under_sweep` pads the object by a
+    hand's reach; a bowl beside a cabinet whose open drawer ended 3 cm before it, 10 cm over
+    its rim, was set aside (~160 steps)."""
     sweep = drawer_sweep(scene, joint)
     b = scene.box(obj)
     if sweep is None:
