@@ -620,7 +620,7 @@ def test_a_bottle_lying_beside_the_base_is_grasped_with_the_hand_pitched_toward_
 
 @pytest.mark.sim
 @pytest.mark.xfail(strict=True, reason="the level perched bowl, put in straight from the wall, comes down leaning "
-                                       "on the side wall; the attempt times out (tunewide i3, versions 19-24)")
+                                       "on the side wall; the attempt times out (tunewide i3, versions 19-25)")
 def test_a_bowl_perched_on_the_bottom_drawers_wall_ends_in_the_closed_drawer():
     """The outcome the test below no longer asserts, kept as a known failure: the same scene
     closed at step ~290 where it was first found (remade leaning there); here it times out.
