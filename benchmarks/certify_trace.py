@@ -59,6 +59,12 @@ def state_file(run: Path, suite: str, task: str, episode: str, step: int) -> Pat
     raise SystemExit(f"{run}: no state for {suite}/{task}/{episode}@{step} (looked for {tail} under release/, stage2/)")
 
 
+def row(p: Phase) -> list[str]:
+    """The phase's cells: start step, label, steps, hand position, the things touched most."""
+    top = ", ".join(f"{k} {v}" for k, v in Counter(p.touched).most_common(TOP_CONTACTS))
+    return [str(p.start), p.label, str(p.steps), " ".join(f"{v:+.3f}" for v in p.eef), top]
+
+
 def trace(env, state: np.ndarray, horizon: int, chunk: int, frame_steps: list[int]):
     """Phases, the attempt's outcome and the frames at `frame_steps` (agentview over the wrist camera)."""
     from pipeline.release.experts import attempt, recovery_expert
@@ -104,12 +110,11 @@ def main(argv: list[str] | None = None) -> None:
         phases, out, frames = trace(env, state, args.horizon, args.chunk, sorted(set(args.frames)))
 
     console = Console()
-    table = Table(title=f"{suite}/{task}/{episode}@{step}: recovery expert, first try")
-    for col in ("step", "phase", "steps", "hand at start (m)", "the robot touched (steps)"):
-        table.add_column(col)
-    for p in phases:
-        top = ", ".join(f"{k} {v}" for k, v in Counter(p.touched).most_common(TOP_CONTACTS))
-        table.add_row(str(p.start), p.label, str(p.steps), " ".join(f"{v:+.3f}" for v in p.eef), top)
+    columns = ("step", "phase", "steps", "hand at start (m)", "the robot touched (steps)")
+    table = Table(*columns, title=f"{suite}/{task}/{episode}@{step}: recovery expert, first try")
+    rows = [row(p) for p in phases]
+    for cells in rows:
+        table.add_row(*cells)
     console.print(table)
     verdict = "certified" if out.success else f"not certified: {out.reason}"
     console.print(f"{verdict} after {out.steps} steps (horizon {args.horizon})")
@@ -119,10 +124,8 @@ def main(argv: list[str] | None = None) -> None:
               "steps": int(out.steps), "horizon": args.horizon, "phases": [asdict(p) for p in phases]}
     args.out.with_suffix(".json").write_text(json.dumps(record, indent=1))
     lines = [f"# {record['scene']}", "", f"{verdict} after {out.steps} steps (horizon {args.horizon})", "",
-             "| step | phase | steps | hand at start (m) | the robot touched (steps) |", "|---|---|---|---|---|"]
-    for p in phases:
-        top = ", ".join(f"{k} {v}" for k, v in Counter(p.touched).most_common(TOP_CONTACTS))
-        lines.append(f"| {p.start} | {p.label} | {p.steps} | {' '.join(f'{v:+.3f}' for v in p.eef)} | {top} |")
+             "| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
+    lines += ["| " + " | ".join(cells) + " |" for cells in rows]
     args.out.with_suffix(".md").write_text("\n".join(lines) + "\n")
     if frames:
         from PIL import Image

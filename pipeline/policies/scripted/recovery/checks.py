@@ -290,6 +290,11 @@ def palm_footprint(g: Grasp) -> np.ndarray:
     return np.array([g.pos - half, g.pos + half])
 
 
+def candidate_palms(scene: Scene, obj: str, tries: int = GRASP_TRIES) -> list[np.ndarray]:
+    """`palm_footprint` of each of `obj`'s first `tries` grasp candidates."""
+    return [palm_footprint(plan_grasp(scene, obj, None, k)) for k in range(tries)]
+
+
 def overhanging_drawer(scene: Scene, obj: str, pad: float = 0.02, tries: int = GRASP_TRIES) -> str | None:
     """The region of an open drawer that overhangs `obj` (a bowl left under the top drawer
     it was to go into), or the way down to it (the palm of each of its first `tries` grasp
@@ -321,7 +326,7 @@ def overhanging_drawer(scene: Scene, obj: str, pad: float = 0.02, tries: int = G
         if _overlap(now, ob, pad) and not _overlap(shut, ob, pad):
             return name
         if palms is None:
-            palms = [palm_footprint(plan_grasp(scene, obj, None, k)) for k in range(tries)]
+            palms = candidate_palms(scene, obj, tries)
         if all(_overlap(now, p, -PALM_MEETS_M) and not _overlap(shut, p) for p in palms):
             return name
     return None
@@ -368,13 +373,12 @@ def sweep_spares(scene: Scene, obj: str, joint: str, grasp) -> bool:
     b = scene.box(obj)
     if sweep is None:
         return False
+    opened = drawer_opened(scene, joint)
     if not _overlap(np.array([b.lo, b.hi]), sweep, pad=SWEEP_BODY_PAD_M) and any(
-            not _overlap(palm_footprint(plan_grasp(scene, obj, None, k)), drawer_opened(scene, joint))
-            for k in range(GRASP_TRIES)):
+            not _overlap(p, opened) for p in candidate_palms(scene, obj)):
         return True
     if sweep[0, 2] < b.hi[2] + FLOOR_CLEAR_M:
         return False
-    opened = drawer_opened(scene, joint)
     if opened[0, 2] > grasp.pos[2] + HAND_HEIGHT_M:
         return True
     in_palm = covers(opened[0], opened[1], palm_points(grasp, (0.0, *PALM_ENDS_M)))

@@ -30,11 +30,11 @@ from pipeline.policies.scripted.scene import Scene, robot_base
 # grip site: the palm's box reaches ~10 cm either way from ~5 cm above the site (see
 # grasps.blocked_depth), the wrist above it is narrower; an open finger is ~2 cm square,
 # its tip ~1.2 cm below the site
-PALM = ((-0.10, 0.10), (-checks.PALM_HALF_M, checks.PALM_HALF_M), (0.05, 0.12))
+PALM = ((-checks.PALM_REACH_M, checks.PALM_REACH_M), (-checks.PALM_HALF_M, checks.PALM_HALF_M), (0.05, 0.12))
 WRIST = ((-0.04, 0.04), (-0.04, 0.04), (0.12, 0.30))
 FINGER = ((-0.01, 0.01), (-0.01, 0.01), (-0.012, 0.05))
 FIST = ((-0.015, 0.015), (-0.012, 0.012), (-0.012, 0.05))  # both fingers closed together
-TRIES = 6  # grasp candidates looked at
+TRIES = checks.GRASP_TRIES  # grasp candidates looked at
 DIRECTIONS = 12  # push directions, evenly round
 OFFSETS = (0.0, -0.01, 0.01)  # the fist's contact point across the push, from the object's middle
 FACE_MARGIN_M = 0.005  # ... kept this far inside the object's edge
@@ -128,11 +128,26 @@ def palm_block(scene: Scene, obj: str, g: Grasp, shift: np.ndarray | None = None
     of; a negative `pad`: go deeper into than that) when grasping with `g` (moved by `shift`
     with the object): a palm landing on a wall's top, which the fingertip rays miss."""
     solids = _solids(scene, obj) if solids is None else solids
-    pos = g.pos if shift is None else g.pos + shift
-    depth = np.maximum(_depths(pos, g.yaw, PALM, solids), _depths(pos, g.yaw, WRIST, solids))
-    for sg in (-1, 1):
-        depth = np.maximum(depth, _depths(pos, g.yaw, FINGER, solids, sg * FINGER_REACH))
+    depth = _hand_depth(g.pos if shift is None else g.pos + shift, g.yaw, solids)
     return sorted({n for n, dep in zip(solids.names, depth) if dep > -pad})
+
+
+def _hand_depth(pos: np.ndarray, yaw: float, solids: Solids) -> np.ndarray:
+    """How far the open hand at grip site `pos` goes into each solid: the deepest of its
+    palm, wrist and two fingers (`_depths`)."""
+    depth = np.maximum(_depths(pos, yaw, PALM, solids), _depths(pos, yaw, WRIST, solids))
+    for sg in (-1, 1):
+        depth = np.maximum(depth, _depths(pos, yaw, FINGER, solids, sg * FINGER_REACH))
+    return depth
+
+
+def _candidates(scene: Scene, obj: str, dest: np.ndarray | None, attempt: int):
+    """(choice, grasp) of the candidates from `attempt` on, each slid clear along a long
+    object first, then slid the other ways (`long_grasp`)."""
+    for k in range(attempt, attempt + TRIES):
+        g = plan_grasp(scene, obj, dest, k)
+        for h in [slide_clear(scene, obj, g), *slides(scene, obj, g)]:
+            yield k, h
 
 
 def _clear(scene: Scene, obj: str, g: Grasp, solids: Solids, shift: np.ndarray | None = None) -> bool:
@@ -156,12 +171,7 @@ def palm_clear(scene: Scene, obj: str, dest: np.ndarray | None, attempt: int) ->
             and (g.rim or not set(palm_block(scene, obj, g, pad=-FIXTURE_DEPTH_M, solids=solids))
                  & set(scene.env.fixture_names))):
         return rays, g
-    for k in range(attempt, attempt + TRIES):
-        g = plan_grasp(scene, obj, dest, k)
-        for h in [slide_clear(scene, obj, g), *slides(scene, obj, g)]:
-            if _clear(scene, obj, h, solids):
-                return k, h
-    return None
+    return next(((k, h) for k, h in _candidates(scene, obj, dest, attempt) if _clear(scene, obj, h, solids)), None)
 
 
 def _fixture_depth(scene: Scene, obj: str, g: Grasp, solids: Solids) -> float | None:
@@ -170,11 +180,9 @@ def _fixture_depth(scene: Scene, obj: str, g: Grasp, solids: Solids) -> float | 
     if checks.tip_blockers(scene, obj, g, set()):
         return None
     fixtures = set(scene.env.fixture_names)
-    if set(palm_block(scene, obj, g, solids=solids)) - fixtures:
-        return None
-    depth = np.maximum(_depths(g.pos, g.yaw, PALM, solids), _depths(g.pos, g.yaw, WRIST, solids))
-    for sg in (-1, 1):
-        depth = np.maximum(depth, _depths(g.pos, g.yaw, FINGER, solids, sg * FINGER_REACH))
+    depth = _hand_depth(g.pos, g.yaw, solids)
+    if any(d > -FREE_PAD for n, d in zip(solids.names, depth) if n not in fixtures):
+        return None  # (as `palm_block` with its pad)
     return max([float(d) for n, d in zip(solids.names, depth) if n in fixtures], default=0.0)
 
 
@@ -188,12 +196,10 @@ def palm_graze(scene: Scene, obj: str, dest: np.ndarray | None, attempt: int) ->
     down and held (measured: a tuning run's libero_goal scene)."""
     solids = _solids(scene, obj)
     best = None
-    for k in range(attempt, attempt + TRIES):
-        g = plan_grasp(scene, obj, dest, k)
-        for h in [slide_clear(scene, obj, g), *slides(scene, obj, g)]:
-            depth = _fixture_depth(scene, obj, h, solids)
-            if depth is not None and depth <= FIXTURE_DEPTH_M and (best is None or depth < best[0] - 1e-4):
-                best = (depth, k, h)
+    for k, h in _candidates(scene, obj, dest, attempt):
+        depth = _fixture_depth(scene, obj, h, solids)
+        if depth is not None and depth <= FIXTURE_DEPTH_M and (best is None or depth < best[0] - 1e-4):
+            best = (depth, k, h)
     return None if best is None else best[1:]
 
 

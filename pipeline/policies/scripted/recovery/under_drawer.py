@@ -57,18 +57,18 @@ def palm_overhang(s, obj: str, joint: str, g: Grasp) -> float:
     return max(0.0, past - checks.PALM_MEETS_M)
 
 
-def uncover_distance(ctx: Ctx, obj: str, joint: str, g: Grasp) -> float:
+def uncover_distance(ctx: Ctx, obj: str, joint: str, overhang: float) -> float:
     """How far (m) the drawer must go in so that its parts no longer overhang `obj` (+pad),
-    nor meet the palm's way down to grip `g` by `checks.PALM_MEETS_M` or more."""
+    nor the palm's way down to it, which reaches `overhang` past it (`palm_overhang`)."""
     s = ctx.scene
     k, d = pull_side(s.env, joint)
     boxes = s.env.joint_part_boxes(joint)
     front = float(boxes[:, 1, k].max()) if d > 0 else float(-boxes[:, 0, k].min())
     edge = float(s.box(obj).lo[k]) if d > 0 else float(-s.box(obj).hi[k])
-    return max(0.0, front - edge + palm_overhang(s, obj, joint, g) + HAND_PAD_M)
+    return max(0.0, front - edge + overhang + HAND_PAD_M)
 
 
-def away_from_drawer(s, obj: str, joint: str, attempt: int, candidates: int = 6) -> int:
+def away_from_drawer(s, obj: str, joint: str, attempt: int, candidates: int = checks.GRASP_TRIES) -> int:
     """Which grasp candidate (`plan_grasp`'s choice) to take: of the first few, the one whose
     grip site lies farthest from the drawer's front (the wrist and forearm come down over
     it, and a drawer just pushed in still sticks out close by); `attempt` takes the next."""
@@ -142,7 +142,7 @@ def clear_from_under(ctx: Ctx, obj: str, region: str, attempt: int = 0) -> Plan:
     out = sign * fr.qpos  # how far out it is now
     g = plan_grasp(s, obj, None, away_from_drawer(s, obj, joint, attempt))  # (as it stands now)
     overhang = palm_overhang(s, obj, joint, g)
-    dist = min(uncover_distance(ctx, obj, joint, g), out)
+    dist = min(uncover_distance(ctx, obj, joint, overhang), out)
     ctx.begin("close", Conjunct(Predicate.CLOSE, region), region)
     yield from push_in(ctx, joint, dist)
     covered = checks.overhanging_drawer(s, obj, pad=0.0) is not None
