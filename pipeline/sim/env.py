@@ -413,6 +413,46 @@ class SimEnv:
         site = self.env.robots[0].eef_site_id
         return np.array(data.site_xpos[site]), np.array(data.site_xmat[site]).reshape(3, 3)
 
+    def ik_residual(self, pos: np.ndarray, rot: np.ndarray, iters: int = 150) -> tuple[float, float]:
+        """How near the arm gets to the grip-site pose (`pos`, rotation `rot`) by damped
+        least squares from its present joints, each step clamped to the joint limits, on a
+        scratch copy (the live state is not touched): (metres, radians) left. Like the
+        operational-space controller it follows the local gradient, so a pose the wrist
+        reaches only past a joint limit the other way round stays off."""
+        import mujoco
+
+        sim = self.env.sim
+        m = sim.model
+        data = mujoco.MjData(m._model)
+        data.qpos[:] = sim.data._data.qpos
+        ids = [m.joint_name2id(f"robot0_joint{i}") for i in range(1, 8)]
+        qadr = [m.jnt_qposadr[j] for j in ids]
+        dofs = [m.jnt_dofadr[j] for j in ids]
+        lo, hi = np.array([m.jnt_range[j] for j in ids]).T
+        site = self.env.robots[0].eef_site_id
+        home = self.arm_home()
+        jp, jr = np.zeros((3, m._model.nv)), np.zeros((3, m._model.nv))
+        err = np.zeros(6)
+        for _ in range(iters):
+            mujoco.mj_kinematics(m._model, data)
+            mujoco.mj_comPos(m._model, data)
+            now = data.site_xmat[site].reshape(3, 3)
+            turn = np.asarray(rot) @ now.T  # the rotation still to go, as a rotation vector
+            angle = np.arccos(np.clip((np.trace(turn) - 1) / 2, -1.0, 1.0))
+            axis = np.array([turn[2, 1] - turn[1, 2], turn[0, 2] - turn[2, 0], turn[1, 0] - turn[0, 1]])
+            rvec = axis / (2 * np.sin(angle)) * angle if angle > 1e-6 else 0.5 * axis
+            err = np.concatenate([np.asarray(pos) - data.site_xpos[site], rvec])
+            if np.linalg.norm(err[:3]) < 1e-3 and np.linalg.norm(err[3:]) < 1e-3:
+                break
+            mujoco.mj_jacSite(m._model, data, jp, jr, site)
+            jac = np.vstack([jp[:, dofs], jr[:, dofs]])
+            pinv = jac.T @ np.linalg.inv(jac @ jac.T + 1e-2 * np.eye(6))
+            # the controller's null space pulls toward the home joints as it goes
+            dq = pinv @ err + (np.eye(7) - pinv @ jac) @ (0.1 * (home - data.qpos[qadr]))
+            dq *= min(1.0, 0.2 / max(float(np.abs(dq).max()), 1e-9))  # small steps: a path, not a jump
+            data.qpos[qadr] = np.clip(data.qpos[qadr] + dq, lo, hi)
+        return float(np.linalg.norm(err[:3])), float(np.linalg.norm(err[3:]))
+
     def eef_hand_quat(self) -> np.ndarray:
         """robosuite's `robot0_eef_quat` (x, y, z, w): MuJoCo's quaternion of the hand body,
         with MuJoCo's sign, which VLA policies trained on LIBERO data expect in their state

@@ -1005,3 +1005,25 @@ def test_version_25_leaves_a_bowl_beside_the_low_drawers_sweep_where_a_grasp_sta
     out = tuning_attempt("libero_10", task, 1471476559, 55, init=3, watch=_watch_held(held))
     assert held == ["akita_black_bowl_1"], held  # held once: straight into the drawer, not set aside first
     assert out.success, out
+
+
+@pytest.mark.sim
+def test_version_26_swivels_a_face_down_book_whose_arm_would_come_down_on_the_caddy():
+    """tunewide2, libero_90 STUDY_SCENE1 (left compartment), init 1, step 50: the book lies on
+    its face before the caddy. Stood up by a corner pinch, the hand points level along the
+    book's old up axis and the wrist links behind it came down on the caddy's wall: the book
+    stalled 4.5 cm over the table, fell back on its face when let go, and the second stand
+    came too late (version 25: a timeout). The lifted book is now swivelled first so that
+    the arm clears the caddy (`face_book.arm_swivel`), it stands at once and goes in."""
+    from pipeline.policies.scripted.primitives import axis_angle_matrix
+    from pipeline.policies.scripted.recovery.face_book import SWIVELS, arm_meets, lying_on_face, turned_approach
+
+    task = "STUDY_SCENE1_pick_up_the_book_and_place_it_in_the_left_compartment_of_the_caddy"
+    with tuning_scene("libero_90", task, 1, 124104048, 50) as s:
+        face = lying_on_face(s, "black_book_1")
+        spot, a2 = s.box("black_book_1").centre[:2], turned_approach(face)
+        assert arm_meets(s, "black_book_1", spot, face.height, a2) == ["desk_caddy_1"]
+        up = np.array([0.0, 0.0, 1.0])
+        assert not arm_meets(s, "black_book_1", spot, face.height, axis_angle_matrix(up, SWIVELS[0]) @ a2)
+    out = tuning_attempt("libero_90", task, 124104048, 50, init=1)
+    assert out.success, out

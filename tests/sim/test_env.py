@@ -218,3 +218,21 @@ def test_plain_libero_seeded_with_zero_before_reset_gets_our_fixture_layout():
             np.testing.assert_array_equal(inner.sim.data.body_xpos[inner.obj_body_id[name]], pos)
     finally:
         plain.close()
+
+
+@pytest.mark.sim
+def test_ik_residual_reaches_a_pose_the_arm_held_and_not_one_beyond_it_leaving_the_state_alone(env):
+    """The pose the arm itself stood at a moment ago is reached (residual ~0) from where it
+    is now; a pose 2 m off is not; and the live state is untouched either way."""
+    env.reset_to_init(0)
+    for a in _random_actions(20, seed=3):
+        env.step(a)
+    pos, rot = env.eef_pose()
+    for a in _random_actions(15, seed=4):
+        env.step(a)
+    before = env.get_state()
+    off_m, off_rad = env.ik_residual(pos, rot)
+    assert off_m < 0.005 and off_rad < 0.01, (off_m, off_rad)
+    far_m, _ = env.ik_residual(pos + [2.0, 0.0, 0.0], rot)
+    assert far_m > 0.5
+    np.testing.assert_array_equal(env.get_state(), before)

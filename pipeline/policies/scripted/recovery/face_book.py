@@ -13,7 +13,9 @@ Output: primitives that
 2. turn the hand with it by the book's whole tilt (a quarter) about the level axis that
    stands it up, rising TURN_RISE_M: the hand then points level along the book's old up
    axis, which the wrist reaches and holds high over the table (low over it, it does not:
-   `stand_book.MAX_TILT`);
+   `stand_book.MAX_TILT`); where the arm behind the hand would then come down on something
+   taller than the book, the hand also swivels about the vertical on the way, by the least
+   that clears it and stays in the arm's reach (`arm_swivel`);
 3. set it down on its bottom edge where it lay, let go (`stand_book.set_down`), and take
    the arm back to its home joints (`unwind`).
 The next attempt finds a standing book and grasps it from above as usual. Of the two top
@@ -28,7 +30,7 @@ import numpy as np
 
 from pipeline.policies.scripted.hand import FINGER_REACH, closing_yaw
 from pipeline.policies.scripted.motion import HAND_CLEARANCE, Ctx, travel
-from pipeline.policies.scripted.primitives import Grip, Primitive, axis_angle_matrix
+from pipeline.policies.scripted.primitives import Grip, Primitive, axis_angle_matrix, hand_orientation
 from pipeline.policies.scripted.recovery import checks
 from pipeline.policies.scripted.recovery.stand_book import FACE_UP, SETTLE_STEPS, BookAxes, book_axes, set_down
 from pipeline.policies.scripted.recovery.unwind import unwind
@@ -54,12 +56,74 @@ LIFT_CLEAR_M = 0.03  # the turned book's lowest point over the table
 # leaned 14 deg short of standing and fell back on its face once let go; 8 cm higher it
 # held 88-93 deg and the book stood (measured: two tuning scenes, STUDY_SCENE1)
 TURN_RISE_M = 0.08
+# set down standing, the hand points level along the book's old up axis and the arm behind
+# it runs level at about the book's height: its wrist links came down on the caddy's wall
+# 25 cm behind the grip, the book stalled 4.5 cm over the table, was let fall and lay on its
+# face again (measured: a tuning scene, a timeout). Points ARM_BACK_M behind the grip there
+# must be clear of the boxes (padded by ARM_ROOM_M, the links' radius) of things standing
+# higher than the grip; else the lifted book is first swivelled about the vertical
+# (SWIVELS, the least that clears them). Set down further along the hand instead, it went
+# 15 cm out to the table's side, where the next grasp missed (measured: the same scene)
+ARM_BACK_M = np.arange(0.08, 0.33, 0.03)
+ARM_ROOM_M = 0.05
+SWIVELS = np.radians([45.0, -45.0, 90.0, -90.0, 135.0, -135.0, 180.0])
+SWIVEL_YAW_MAX = np.pi / 2 + 0.3  # the hand's yaw kept within this (`set_down` unwinds beyond)
+REACH_M, REACH_RAD = 0.02, 0.05  # `ik_residual` within these: the turned hand is in reach
 
 
 def lying_on_face(scene: Scene, obj: str) -> BookAxes | None:
     """The book's axes when `obj` is a book lying on a face; None otherwise."""
     ax = book_axes(scene, obj)
     return ax if ax is not None and abs(float(ax.thin[2])) > FACE_UP else None
+
+
+def turned_approach(held: BookAxes) -> np.ndarray:
+    """The hand's approach once it has turned with the lifted book by its whole tilt about
+    the level axis that stands it (up high, the wrist reaches pointing level; low over the
+    table it does not: `MAX_TILT`)."""
+    tilt = float(np.arccos(np.clip(held.up[2], -1.0, 1.0)))
+    axis = np.cross(held.up, [0.0, 0.0, 1.0])
+    a2 = np.array([0.0, 0.0, -1.0])
+    if np.linalg.norm(axis) > 1e-6:
+        a2 = axis_angle_matrix(axis, min(tilt, TURN_MAX)) @ a2
+    return a2
+
+
+def arm_meets(scene: Scene, obj: str, spot: np.ndarray, height: float, a2: np.ndarray) -> list[str]:
+    """The things standing higher than the grip whose boxes (padded by ARM_ROOM_M across)
+    the arm behind a hand pointing along `a2` meets, the book (held at a top corner,
+    `height` tall) set down standing at `spot`. A neighbour no taller than the book only
+    grazes the links (measured: a standing book beside, certified)."""
+    back = level(-a2)
+    grip = np.array([spot[0], spot[1], scene.table_height() + height])
+    points = [grip[:2] + back[:2] * d for d in ARM_BACK_M]
+    hit = {name for name, b in scene.obstacle_boxes({obj, "table"}) if b[1, 2] > grip[2] + 0.01
+           and any(np.all(b[0, :2] - ARM_ROOM_M <= p) and np.all(p <= b[1, :2] + ARM_ROOM_M) for p in points)}
+    return sorted(hit)
+
+
+def arm_swivel(scene: Scene, obj: str, held: BookAxes, spot: np.ndarray, yaw: float, turn_to: np.ndarray) -> float:
+    """Radians to swivel the lifted book (and the hand's yaw) about the vertical before it
+    is turned, so that the arm behind the hand clears what stands higher than the grip
+    where the book is set down (`arm_meets`): 0 when it does as it is, or when no swivel
+    within the wrist's yaw (SWIVEL_YAW_MAX) does with the turned hand at `turn_to` in the
+    arm's reach (`SimEnv.ik_residual` within REACH_M, REACH_RAD). A swivel that left the
+    hand pointing level straight away from the base took joint 6 to its limit: the turn
+    stalled, the hand drifted 20 cm up and the book was let go in the air (measured: a
+    tuning scene, certified before)."""
+    a2 = turned_approach(held)
+    if not arm_meets(scene, obj, spot, held.height, a2):
+        return 0.0
+    for swivel in SWIVELS:
+        if abs(yaw + swivel) > SWIVEL_YAW_MAX:
+            continue
+        a = axis_angle_matrix(np.array([0.0, 0.0, 1.0]), swivel) @ a2
+        if arm_meets(scene, obj, spot, held.height, a):
+            continue
+        off_m, off_rad = scene.env.ik_residual(turn_to, hand_orientation(yaw + swivel, a))
+        if off_m <= REACH_M and off_rad <= REACH_RAD:
+            return float(swivel)
+    return 0.0
 
 
 def level(v: np.ndarray) -> np.ndarray:
@@ -158,16 +222,16 @@ def stand_from_face(ctx: Ctx, obj: str, ax: BookAxes, attempt: int) -> Generator
     held = book_axes(s, obj)
     if held is None or not carried(s, obj, checks.held(s)):
         return True
-    # the hand turns with the book by its whole tilt about the level axis that stands it: up
-    # here, the wrist reaches pointing level (low over the table it does not: `MAX_TILT`)
-    tilt = float(np.arccos(np.clip(held.up[2], -1.0, 1.0)))
-    axis = np.cross(held.up, [0.0, 0.0, 1.0])
-    a2 = np.array([0.0, 0.0, -1.0])
-    if np.linalg.norm(axis) > 1e-6:
-        a2 = axis_angle_matrix(axis, min(tilt, TURN_MAX)) @ a2
+    # swivelled on the way where the arm would meet something (`arm_swivel`): the book turns
+    # with the hand about the vertical too
+    turn_to = s.eef() + [0.0, 0.0, TURN_RISE_M]
+    swivel = arm_swivel(s, obj, held, was, yaw, turn_to)
+    a2 = axis_angle_matrix(np.array([0.0, 0.0, 1.0]), swivel) @ turned_approach(held)
+    yaw += swivel
+    ctx.yaw_hold = yaw
     ctx.approach_hold = a2
     try:
-        yield ctx.move(s.eef() + [0.0, 0.0, TURN_RISE_M], gripper=1.0, yaw=yaw, approach=a2, tol=0.03,
+        yield ctx.move(turn_to, gripper=1.0, yaw=yaw, approach=a2, tol=0.03,
                        rot_tol=0.06, max_steps=90, label="turn")
         yield Grip(1.0, SETTLE_STEPS // 2, label="settle")
     finally:
