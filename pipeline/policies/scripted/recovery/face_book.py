@@ -165,6 +165,23 @@ def corner_pinches(scene: Scene, obj: str, ax: BookAxes) -> list[tuple[np.ndarra
     return [(g, k) for *_, g, k in sorted(out, key=lambda o: (o[0], o[1]))]
 
 
+def crowded_pinches(scene: Scene, obj: str, ax: BookAxes) -> bool:
+    """Every top corner's hand line comes within CROWDED_M of something standing over the
+    grip (`_crowded`): a pinch there came down on the caddy's wall, hovered against it for 85
+    steps and closed on nothing, twice (measured: a tuning scene, a timeout)."""
+    return all(_crowded(scene, obj, g, k) for g, k in _corners(scene, ax))
+
+
+def pinch_clear_after(scene: Scene, obj: str, ax: BookAxes, shift: np.ndarray) -> bool:
+    """Some top corner, the book slid by `shift`, has its fingertips' spots free and its hand
+    line clear of the crowd (for `nudge.push_plan`, which slides it there first)."""
+    for g, k in _corners(scene, ax):
+        grip = g + [shift[0], shift[1], 0.0]
+        if all(_tip_free(scene, obj, t) for t in _tips(grip, k)) and not _crowded(scene, obj, grip, k):
+            return True
+    return False
+
+
 def pinch_blockers(scene: Scene, obj: str, ax: BookAxes, keep: set[str]) -> list[str]:
     """Where no top corner has room for the fingers (`corner_pinches`): the movable objects
     (not in `keep`) whose boxes take the fingertips' spots at the corner that they alone

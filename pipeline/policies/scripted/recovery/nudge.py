@@ -15,6 +15,7 @@ push itself reads nothing but the plan, and the caller replans from the live sta
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -226,9 +227,11 @@ def _hand_path_clear(pos: np.ndarray, end: np.ndarray, yaw: float, solids: Solid
     return True
 
 
-def push_plan(scene: Scene, obj: str, dest: np.ndarray | None) -> Push | None:
-    """The shortest push of `obj` by the fist after which some grasp candidate is clear: the
-    fist comes down behind it and pushes straight, the hand clear of every neighbour and
+def push_plan(scene: Scene, obj: str, dest: np.ndarray | None,
+              frees: Callable[[np.ndarray], bool] | None = None) -> Push | None:
+    """The shortest push of `obj` by the fist after which some grasp candidate is clear (or,
+    given `frees`, after which `frees(shift)` holds: another skill's test of its own grasp):
+    the fist comes down behind it and pushes straight, the hand clear of every neighbour and
     the object driven into none; ties go to the end nearest the arm's home. None: no push
     frees it."""
     boxes, solids = _boxes(scene, obj), _solids(scene, obj)
@@ -237,7 +240,11 @@ def push_plan(scene: Scene, obj: str, dest: np.ndarray | None) -> Push | None:
     z = scene.table_height() + PUSH_Z
     base = robot_base(scene)[:2]
     home = base + checks.HOME_XY
-    cands = [plan_grasp(scene, obj, dest, k) for k in range(TRIES)]
+    if frees is None:
+        cands = [plan_grasp(scene, obj, dest, k) for k in range(TRIES)]
+
+        def frees(shift: np.ndarray) -> bool:
+            return any(_clear(scene, obj, g, solids, shift) for g in cands)
     for length in LENGTHS:
         best = None
         for theta in np.arange(DIRECTIONS) * 2 * np.pi / DIRECTIONS:
@@ -249,7 +256,7 @@ def push_plan(scene: Scene, obj: str, dest: np.ndarray | None) -> Push | None:
                 continue
             if _pushed_into(scene, obj, shift, boxes):
                 continue
-            if not any(_clear(scene, obj, g, solids, u * (length - SLIP_M)) for g in cands):
+            if not frees(u * (length - SLIP_M)):
                 continue
             back = float((corners @ u[:2]).min())
             mid = float((corners @ across[:2]).mean())

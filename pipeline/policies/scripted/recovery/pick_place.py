@@ -28,7 +28,8 @@ from pipeline.policies.scripted.placement import (box_centre_offset, destination
                                                   support_ceiling, turned_foot)
 from pipeline.policies.scripted.primitives import Primitive
 from pipeline.policies.scripted.recovery import checks
-from pipeline.policies.scripted.recovery.face_book import lying_on_face, stand_from_face
+from pipeline.policies.scripted.recovery.face_book import (crowded_pinches, lying_on_face, pinch_clear_after,
+                                                           stand_from_face)
 from pipeline.policies.scripted.recovery.long_grasp import lying_long, slide_clear
 from pipeline.policies.scripted.recovery.nudge import palm_clear, palm_graze, push, push_plan
 from pipeline.policies.scripted.recovery.lying_cup import grasp_by_handle, lying_handle_grasp, place_by_handle
@@ -163,6 +164,11 @@ def take(ctx: Ctx, obj: str, target: str, attempt: int) -> Generator[Primitive, 
     if carried(s, obj, checks.held(s)):
         return Held()
     face = lying_on_face(s, obj)
+    if face is not None and crowded_pinches(s, obj, face) and (shove := push_plan(
+            s, obj, None, frees=lambda shift: pinch_clear_after(s, obj, face, shift))) is not None:
+        # every corner crowded by a wall: slid clear by the fist first (nudge.py)
+        yield from push(ctx, obj, shove)
+        face = lying_on_face(s, obj)
     if face is not None and (yield from stand_from_face(ctx, obj, face, attempt)):
         return Ended.PREPARED  # standing (or not)
     if (way := tip_way(s, obj)) is not None:  # upside down: onto a face, stood up from there
