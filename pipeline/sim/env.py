@@ -432,16 +432,18 @@ class SimEnv:
         site = self.env.robots[0].eef_site_id
         home = self.arm_home()
         jp, jr = np.zeros((3, m._model.nv)), np.zeros((3, m._model.nv))
+        want, have, local = np.zeros(4), np.zeros(4), np.zeros(3)
+        mujoco.mju_mat2Quat(want, np.asarray(rot, dtype=float).reshape(9))
         err = np.zeros(6)
         for _ in range(iters):
             mujoco.mj_kinematics(m._model, data)
             mujoco.mj_comPos(m._model, data)
             now = data.site_xmat[site].reshape(3, 3)
-            turn = np.asarray(rot) @ now.T  # the rotation still to go, as a rotation vector
-            angle = np.arccos(np.clip((np.trace(turn) - 1) / 2, -1.0, 1.0))
-            axis = np.array([turn[2, 1] - turn[1, 2], turn[0, 2] - turn[2, 0], turn[1, 0] - turn[0, 1]])
-            rvec = axis / (2 * np.sin(angle)) * angle if angle > 1e-6 else 0.5 * axis
-            err = np.concatenate([np.asarray(pos) - data.site_xpos[site], rvec])
+            # the rotation still to go as a world rotation vector (MuJoCo's quaternion
+            # difference is in the present frame, and holds up to a half turn)
+            mujoco.mju_mat2Quat(have, data.site_xmat[site])
+            mujoco.mju_subQuat(local, want, have)
+            err = np.concatenate([np.asarray(pos) - data.site_xpos[site], now @ local])
             if np.linalg.norm(err[:3]) < 1e-3 and np.linalg.norm(err[3:]) < 1e-3:
                 break
             mujoco.mj_jacSite(m._model, data, jp, jr, site)
