@@ -385,11 +385,16 @@ class SimEnv:
         sim = self.env.sim
         return np.array(sim.data.body_xpos[sim.model.body_name2id("robot0_base")])
 
+    def _arm_joint_ids(self) -> list[int]:
+        """MuJoCo ids of the arm's seven joints, base to wrist."""
+        m = self.env.sim.model
+        return [m.joint_name2id(f"robot0_joint{i}") for i in range(1, 8)]
+
     def arm_joints(self) -> tuple[np.ndarray, np.ndarray]:
         """The arm's joint positions (7,) and limits (7, 2), base to wrist."""
         sim = self.env.sim
         m = sim.model
-        ids = [m.joint_name2id(f"robot0_joint{i}") for i in range(1, 8)]
+        ids = self._arm_joint_ids()
         return np.array([sim.data.qpos[m.jnt_qposadr[j]] for j in ids]), np.array([m.jnt_range[j] for j in ids])
 
     def arm_home(self) -> np.ndarray:
@@ -407,7 +412,7 @@ class SimEnv:
         m = sim.model
         data = mujoco.MjData(m._model)
         data.qpos[:] = sim.data._data.qpos
-        ids = [m.joint_name2id(f"robot0_joint{i}") for i in range(1, 8)]
+        ids = self._arm_joint_ids()
         data.qpos[[m.jnt_qposadr[j] for j in ids]] = joints
         mujoco.mj_kinematics(m._model, data)
         site = self.env.robots[0].eef_site_id
@@ -425,7 +430,7 @@ class SimEnv:
         m = sim.model
         data = mujoco.MjData(m._model)
         data.qpos[:] = sim.data._data.qpos
-        ids = [m.joint_name2id(f"robot0_joint{i}") for i in range(1, 8)]
+        ids = self._arm_joint_ids()
         qadr = [m.jnt_qposadr[j] for j in ids]
         dofs = [m.jnt_dofadr[j] for j in ids]
         lo, hi = np.array([m.jnt_range[j] for j in ids]).T

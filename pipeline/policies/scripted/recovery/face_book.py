@@ -102,18 +102,20 @@ def arm_meets(scene: Scene, obj: str, spot: np.ndarray, height: float, a2: np.nd
     return sorted(hit)
 
 
-def arm_swivel(scene: Scene, obj: str, held: BookAxes, spot: np.ndarray, yaw: float, turn_to: np.ndarray) -> float:
-    """Radians to swivel the lifted book (and the hand's yaw) about the vertical before it
-    is turned, so that the arm behind the hand clears what stands higher than the grip
-    where the book is set down (`arm_meets`): 0 when it does as it is, or when no swivel
-    within the wrist's yaw (SWIVEL_YAW_MAX) does with the turned hand at `turn_to` in the
-    arm's reach (`SimEnv.ik_residual` within REACH_M, REACH_RAD). A swivel that left the
-    hand pointing level straight away from the base took joint 6 to its limit: the turn
-    stalled, the hand drifted 20 cm up and the book was let go in the air (measured: a
-    tuning scene, certified before)."""
+def arm_swivel(scene: Scene, obj: str, held: BookAxes, spot: np.ndarray, yaw: float,
+               turn_to: np.ndarray) -> tuple[float, np.ndarray]:
+    """(radians, the hand's approach after the turn) of the swivel of the lifted book (and
+    the hand's yaw) about the vertical before it is turned, so that the arm behind the hand
+    clears what stands higher than the grip where the book is set down (`arm_meets`): none
+    (0, `turned_approach`) when it does as it is, or when no swivel within the wrist's yaw
+    (SWIVEL_YAW_MAX) does with the turned hand at `turn_to` in the arm's reach
+    (`SimEnv.ik_residual` within REACH_M, REACH_RAD). A swivel that left the hand pointing
+    level straight away from the base took joint 6 to its limit: the turn stalled, the hand
+    drifted 20 cm up and the book was let go in the air (measured: a tuning scene, certified
+    before)."""
     a2 = turned_approach(held)
     if not arm_meets(scene, obj, spot, held.height, a2):
-        return 0.0
+        return 0.0, a2
     for swivel in SWIVELS:
         if abs(yaw + swivel) > SWIVEL_YAW_MAX:
             continue
@@ -122,8 +124,8 @@ def arm_swivel(scene: Scene, obj: str, held: BookAxes, spot: np.ndarray, yaw: fl
             continue
         off_m, off_rad = scene.env.ik_residual(turn_to, hand_orientation(yaw + swivel, a))
         if off_m <= REACH_M and off_rad <= REACH_RAD:
-            return float(swivel)
-    return 0.0
+            return float(swivel), a
+    return 0.0, a2
 
 
 def level(v: np.ndarray) -> np.ndarray:
@@ -242,8 +244,7 @@ def stand_from_face(ctx: Ctx, obj: str, ax: BookAxes, attempt: int) -> Generator
     # swivelled on the way where the arm would meet something (`arm_swivel`): the book turns
     # with the hand about the vertical too
     turn_to = s.eef() + [0.0, 0.0, TURN_RISE_M]
-    swivel = arm_swivel(s, obj, held, was, yaw, turn_to)
-    a2 = axis_angle_matrix(np.array([0.0, 0.0, 1.0]), swivel) @ turned_approach(held)
+    swivel, a2 = arm_swivel(s, obj, held, was, yaw, turn_to)
     yaw += swivel
     ctx.yaw_hold = yaw
     ctx.approach_hold = a2
