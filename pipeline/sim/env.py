@@ -419,11 +419,19 @@ class SimEnv:
         return np.array(data.site_xpos[site]), np.array(data.site_xmat[site]).reshape(3, 3)
 
     def ik_residual(self, pos: np.ndarray, rot: np.ndarray, iters: int = 150) -> tuple[float, float]:
-        """How near the arm gets to the grip-site pose (`pos`, rotation `rot`) by damped
-        least squares from its present joints, each step clamped to the joint limits, on a
-        scratch copy (the live state is not touched): (metres, radians) left. Like the
-        operational-space controller it follows the local gradient, so a pose the wrist
-        reaches only past a joint limit the other way round stays off."""
+        """How near the arm gets to the grip-site pose (`pos`, rotation `rot`) from its
+        present joints: (metres, radians) left (`ik_reach`)."""
+        _, off_m, off_rad = self.ik_reach(pos, rot, iters=iters)
+        return off_m, off_rad
+
+    def ik_reach(self, pos: np.ndarray, rot: np.ndarray, start: np.ndarray | None = None,
+                 iters: int = 150) -> tuple[np.ndarray, float, float]:
+        """(joints (7,), metres, radians left) where the arm ends going to the grip-site pose
+        (`pos`, rotation `rot`) by damped least squares from `start` (its present joints by
+        default), each step clamped to the joint limits, on a scratch copy (the live state
+        is not touched). Like the operational-space controller it follows the local
+        gradient, so a pose the wrist reaches only past a joint limit the other way round
+        stays off; chained through the joints it returns, it follows a sequence of moves."""
         import mujoco
 
         sim = self.env.sim
@@ -434,6 +442,8 @@ class SimEnv:
         qadr = [m.jnt_qposadr[j] for j in ids]
         dofs = [m.jnt_dofadr[j] for j in ids]
         lo, hi = np.array([m.jnt_range[j] for j in ids]).T
+        if start is not None:
+            data.qpos[qadr] = start
         site = self.env.robots[0].eef_site_id
         home = self.arm_home()
         jp, jr = np.zeros((3, m._model.nv)), np.zeros((3, m._model.nv))
@@ -458,7 +468,7 @@ class SimEnv:
             dq = pinv @ err + (np.eye(7) - pinv @ jac) @ (0.1 * (home - data.qpos[qadr]))
             dq *= min(1.0, 0.2 / max(float(np.abs(dq).max()), 1e-9))  # small steps: a path, not a jump
             data.qpos[qadr] = np.clip(data.qpos[qadr] + dq, lo, hi)
-        return float(np.linalg.norm(err[:3])), float(np.linalg.norm(err[3:]))
+        return data.qpos[qadr].copy(), float(np.linalg.norm(err[:3])), float(np.linalg.norm(err[3:]))
 
     def eef_hand_quat(self) -> np.ndarray:
         """robosuite's `robot0_eef_quat` (x, y, z, w): MuJoCo's quaternion of the hand body,

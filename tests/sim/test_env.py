@@ -236,3 +236,22 @@ def test_ik_residual_reaches_a_pose_the_arm_held_and_not_one_beyond_it_leaving_t
     far_m, _ = env.ik_residual(pos + [2.0, 0.0, 0.0], rot)
     assert far_m > 0.5
     np.testing.assert_array_equal(env.get_state(), before)
+
+
+def test_ik_reach_goes_from_the_joints_it_is_given_and_returns_joints_that_hold_the_pose(env):
+    """From a start other than the present joints, the arm's returned joints put the grip
+    site at the pose asked for (the simulator's own forward kinematics); one iteration's
+    residual is measured from the start given, not from the present joints."""
+    env.reset_to_init(0)
+    for a in _random_actions(20, seed=5):
+        env.step(a)
+    pos, rot = env.eef_pose()
+    start = env.arm_home() + 0.3
+    joints, off_m, off_rad = env.ik_reach(pos, rot, start=start)
+    assert off_m < 0.005 and off_rad < 0.01, (off_m, off_rad)
+    at_pos, at_rot = env.eef_pose_at(joints)
+    np.testing.assert_allclose(at_pos, pos, atol=0.006)
+    np.testing.assert_allclose(at_rot, rot, atol=0.02)
+    _, iters1_m, _ = env.ik_reach(pos + [0.3, 0.0, -0.2], rot, iters=1)
+    _, iters1_from_start_m, _ = env.ik_reach(pos + [0.3, 0.0, -0.2], rot, start=start, iters=1)
+    assert iters1_m != iters1_from_start_m

@@ -18,8 +18,9 @@ The hand turns at most `MAX_TILT` from pointing down (a hand pointing level, low
 table, is out of the wrist's range: measured 25 deg short). A book tilted further (lying on
 its side, or standing on its top edge, upside down: its origin then cannot get into a
 compartment) is turned by a quarter at a time: `quarter_turn` holds it by a top corner with
-the hand pitched 45 deg along the book's plane, lifts it, pitches the hand 45 deg the other
-way, sets it down where it was and lets go. Upside down takes two quarters, then the book
+the hand pitched 45 deg along the book's plane (30 deg where the arm then reaches the end of
+the turn, `_turn_pitch`), lifts it, pitches the hand the rest of the quarter the other way,
+sets it down where it was and lets go. Upside down takes two quarters, then the book
 stands and is grasped from above as usual. A book whose top leans toward the robot's base,
 its faces standing, is turned the same way by its whole tilt (`turn_first`): the hand along
 its axis is out of reach there.
@@ -62,6 +63,9 @@ STEEP = np.radians(65.0)  # hand tilts beyond this are made TURN_ABOVE_M above t
 TURN_ABOVE_M = 0.15
 TURN_CLEAR_M = 0.05  # lowest corner above the table while the book turns
 PITCH = np.radians(45.0)  # hand pitch either way for a quarter turn
+# ... or less at the grasp where the turn then stays in reach (`_turn_pitch`)
+NEAR_PITCH = np.radians(30.0)
+TURN_REACH_RAD = 0.15  # `SimEnv.ik_reach` this near the turned hand: in reach
 GAIN_TIE = 0.05  # two ways of turning that bring the up axis this near (its height) are alike
 FACES_STAND = 0.3  # faces' normal more level than this (sine of its elevation): it turns in its plane
 LEANS_TO_BASE = 0.5  # its up axis's level part this near (cosine) the way to the robot's base
@@ -147,12 +151,46 @@ def turn_first(scene: Scene, ax: BookAxes) -> tuple[float, float, bool] | None:
     LEAN_OVERSHOOT, the hand pitching toward the base, and on until it stands (it lags the
     hand as it pivots in the fingers)."""
     if too_steep(ax):
-        return 2 * PITCH, PITCH, False
+        return 2 * PITCH, _turn_pitch(scene, ax), False
     to_base = (scene.env.robot_base() - ax.top_mid)[:2]
     toward = float(ax.up[:2] @ to_base) / max(float(np.linalg.norm(to_base)), 1e-6)
     if abs(float(ax.thin[2])) < FACES_STAND and toward > LEANS_TO_BASE:
         return _tilt(ax.up) + LEAN_OVERSHOOT, 0.0, True
     return None
+
+
+def _turn_pitch(scene: Scene, ax: BookAxes) -> float:
+    """The hand's pitch at the grasp of a quarter turn: NEAR_PITCH where the arm, following
+    the grasp, the lift and the turn (`SimEnv.ik_reach` chained), ends within TURN_REACH_RAD
+    of the turned hand; else PITCH. Pitched 45 deg at a corner far from the base, the elbow
+    went straight against its limit: the turn crept on for 95 steps, the hand drifted 12 cm
+    out and 7 cm up, and let go of the book 17 cm over the table (measured: two of
+    `book_poses.py`'s books on a side, timeouts). Pitched 30 deg, the hand has to pitch 60
+    deg the other way after the turn, out of the wrist's reach in other places (measured:
+    the turns that stalled ended 0.22-0.33 rad off, those that went 0-0.12)."""
+    grip, a1, a2 = _corner_grip(scene, ax, 2 * PITCH, NEAR_PITCH)
+    yaw, approach = tilted_grasp(_held(ax, grip, a1))
+    up = grip + [0.0, 0.0, _turn_lift(scene, ax, grip)]
+    env = scene.env
+    joints, *_ = env.ik_reach(grip, hand_orientation(yaw, approach))
+    joints, *_ = env.ik_reach(up, hand_orientation(yaw, approach), start=joints)
+    _, _, off_rad = env.ik_reach(up, hand_orientation(yaw, a2), start=joints)
+    return NEAR_PITCH if off_rad <= TURN_REACH_RAD else PITCH
+
+
+def _held(ax: BookAxes, grip: np.ndarray, a1: np.ndarray) -> BookAxes:
+    """The book's axes as `_edge_grasp_turn` sees them for a quarter turn's corner grasp at
+    `grip` with the hand pointing along `a1`: the corner is its top."""
+    return BookAxes(up=-a1, thin=ax.thin, top_mid=grip + (-a1) * SLAB_GRIP_BELOW_TOP,
+                    long=np.cross(ax.thin, ax.up), ends=ax.ends)
+
+
+def _turn_lift(s: Scene, ax: BookAxes, grip: np.ndarray) -> float:
+    """How high a quarter turn lifts the book gripped at `grip` before it turns: held by a
+    corner, it swings through up to its diagonal below the fingers, that far clear of the
+    table."""
+    reach = max(float(np.linalg.norm(c - grip)) for c in _plane_corners(ax))
+    return max(reach + TURN_CLEAR_M - (grip[2] - s.table_height()), 0.04)
 
 
 def _tilt(up: np.ndarray) -> float:
@@ -215,16 +253,9 @@ def quarter_turn(ctx: Ctx, obj: str, ax: BookAxes, angle: float = 2 * PITCH, gra
     the rest of `angle` the other way (`upright`: on, while the book lags short of upright),
     set it down where it was, let go."""
     s = ctx.scene
-    side = np.cross(ax.thin, ax.up)
-    corners = _plane_corners(ax)
     grip, a1, a2 = _corner_grip(s, ax, angle, grasp_pitch)
-    held = BookAxes(up=-a1, thin=ax.thin, top_mid=grip + (-a1) * SLAB_GRIP_BELOW_TOP, long=side, ends=ax.ends)
-    # held by a corner, the book swings through up to its diagonal below the fingers: lift it
-    # that far clear of the table
-    reach = max(float(np.linalg.norm(c - grip)) for c in corners)
-    lift = reach + TURN_CLEAR_M - (grip[2] - s.table_height())
     was = s.box(obj).centre[:2]  # a free spot: the book stood there
-    yield from _edge_grasp_turn(ctx, obj, held, lift=max(lift, 0.04), to=a2, rot_tol=0.06)
+    yield from _edge_grasp_turn(ctx, obj, _held(ax, grip, a1), lift=_turn_lift(s, ax, grip), to=a2, rot_tol=0.06)
     yield Grip(1.0, SETTLE_STEPS // 2, label="settle")
     if upright:
         a2 = yield from _straighten(ctx, obj, np.cross(a1, a2), a2)
