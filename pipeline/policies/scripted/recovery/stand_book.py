@@ -37,6 +37,7 @@ from pipeline.policies.scripted.grasps import SLAB_GRIP_BELOW_TOP, SLAB_RATIO, S
 from pipeline.policies.scripted.hand import FINGER_REACH, closing_yaw
 from pipeline.policies.scripted.motion import HAND_CLEARANCE, Ctx, Plan, travel
 from pipeline.policies.scripted.primitives import Grip, axis_angle_matrix, hand_orientation, rotation_error
+from pipeline.policies.scripted.recovery.checks import toward_base
 from pipeline.policies.scripted.scene import Scene
 
 UPRIGHT_DEG = 20.0  # up axis within this of vertical: standing, grasped from above as usual
@@ -79,6 +80,8 @@ PUT_DOWN_GAP = 0.008  # book's lowest point above the table when it is let go
 PALM_POINTS_M = ((0.03, FINGER_REACH), (0.07, 0.0), (0.07, 0.05))
 EDGE_ROOM_M = 0.01
 LEVEL_TOL = 0.3  # radians: the hand this near pointing down after a turn (`back_out` calls 25 deg awkward)
+RETREAT_PULL_M = 0.08  # toward the base as the hand rises after a set-down, when it points there
+TOWARD_BASE = 0.3  # ... its level part this long in the base's direction or longer
 
 
 @dataclass(frozen=True)
@@ -326,7 +329,13 @@ def set_down(ctx: Ctx, obj: str, was: np.ndarray, a2: np.ndarray, level: bool) -
     # over an upside-down book's two turns). After a turn that stands the book it gained
     # nothing (the next grasp came at the same step) and a tuning book then jammed on the
     # compartment's rim: not there
-    yield ctx.move(s.eef() + [0.0, 0.0, 0.05], yaw=yaw2, tol=0.03, rot_tol=LEVEL_TOL if level else None,
+    # a hand left pointing toward the base (a book stood up from its face or its top edge)
+    # rises toward the base as it levels: straight up, the elbow stretched into its limit,
+    # the hand stayed tilted, and undoing that (`unwind`, `back_out`) cost ~100 steps
+    # (measured: `book_poses.py` upside down, seeds 11, 13 and 17, +13 certified, 3 lost)
+    points_back = float(a2[:2] @ toward_base(s, 1.0)[:2]) > TOWARD_BASE
+    pull = toward_base(s, RETREAT_PULL_M) if level and points_back else np.zeros(3)
+    yield ctx.move(s.eef() + pull + [0.0, 0.0, 0.05], yaw=yaw2, tol=0.03, rot_tol=LEVEL_TOL if level else None,
                    max_steps=30 if level else 15, label="retreat")
     if abs(yaw2) > np.pi / 2 + 0.3:
         # the hand was turned half about its axis (out of range the other way): turn it back
