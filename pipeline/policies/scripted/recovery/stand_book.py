@@ -419,6 +419,13 @@ def _edge_grasp_turn(ctx: Ctx, obj: str, ax: BookAxes, lift: float = LIFT_M, to:
     yaw, approach = tilted_grasp(ax)
     grip = ax.top_mid - ax.up * SLAB_GRIP_BELOW_TOP
     start = grip + ax.up * BACK_OFF_M
+    # the hand turned by half a turn about its axis (same grasp) from the outset where the
+    # wrist reaches that way round and not the other: tilted toward a joint-7 limit first, the
+    # hand stalled TILT_STEPS before the turned yaw below (measured: ~60 steps, a timeout)
+    flipped = yaw - np.pi if yaw > 0 else yaw + np.pi
+    off_rad = s.env.ik_residual(start, hand_orientation(yaw, approach))[1]
+    if off_rad > REACH_TOL and s.env.ik_residual(start, hand_orientation(flipped, approach))[1] < off_rad:
+        yaw = flipped
     ctx.note(stand_book=True)
     if not s.gripper_open():
         yield Grip(-1.0, ctx.open_steps + 4, label="release")
