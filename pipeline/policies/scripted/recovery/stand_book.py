@@ -341,7 +341,7 @@ def set_down(ctx: Ctx, obj: str, was: np.ndarray, a2: np.ndarray, level: bool) -
         # the hand was turned half about its axis (out of range the other way): turn it back
         # up here, or the next grasp turns the wrist on its way down and knocks the book over
         # (measured)
-        ctx.yaw_hold = yaw2 - np.pi if yaw2 > 0 else yaw2 + np.pi
+        ctx.yaw_hold = _half_turned(yaw2)
         yield ctx.move(s.eef() + [0.0, 0.0, 0.04], yaw=ctx.yaw_hold, tol=0.03, rot_tol=0.1, max_steps=40,
                        label="unwind")
 
@@ -397,6 +397,12 @@ def _straighten(ctx: Ctx, obj: str, axis: np.ndarray, approach: np.ndarray) -> P
     return approach
 
 
+def _half_turned(yaw: float) -> float:
+    """The same hand turned by half a turn about its axis (fingers close along the same
+    line), the yaw kept within a half turn of zero."""
+    return yaw - np.pi if yaw > 0 else yaw + np.pi
+
+
 def _rot_off(s: Scene, yaw: float, approach: np.ndarray | None) -> float:
     """Radians between the hand's orientation now and the one asked for."""
     return float(np.linalg.norm(rotation_error(hand_orientation(yaw, approach), s.env.eef_pose()[1])))
@@ -422,10 +428,9 @@ def _edge_grasp_turn(ctx: Ctx, obj: str, ax: BookAxes, lift: float = LIFT_M, to:
     # the hand turned by half a turn about its axis (same grasp) from the outset where the
     # wrist reaches that way round and not the other: tilted toward a joint-7 limit first, the
     # hand stalled TILT_STEPS before the turned yaw below (measured: ~60 steps, a timeout)
-    flipped = yaw - np.pi if yaw > 0 else yaw + np.pi
     off_rad = s.env.ik_residual(start, hand_orientation(yaw, approach))[1]
-    if off_rad > REACH_TOL and s.env.ik_residual(start, hand_orientation(flipped, approach))[1] < off_rad:
-        yaw = flipped
+    if off_rad > REACH_TOL and s.env.ik_residual(start, hand_orientation(_half_turned(yaw), approach))[1] < off_rad:
+        yaw = _half_turned(yaw)
     ctx.note(stand_book=True)
     if not s.gripper_open():
         yield Grip(-1.0, ctx.open_steps + 4, label="release")
@@ -446,7 +451,7 @@ def _edge_grasp_turn(ctx: Ctx, obj: str, ax: BookAxes, lift: float = LIFT_M, to:
         if _rot_off(s, yaw, approach) > REACH_TOL:
             # out of the wrist's range this way round (which way is, depends on where the book
             # lies: measured both ways): the hand turned by half a turn about its axis, same grasp
-            yaw = yaw - np.pi if yaw > 0 else yaw + np.pi
+            yaw = _half_turned(yaw)
             ctx.yaw_hold = yaw
             yield ctx.move(start, yaw=yaw, approach=approach, tol=0.006, rot_tol=rot_tol, max_steps=TILT_STEPS,
                            label="tilt")
