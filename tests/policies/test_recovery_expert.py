@@ -1067,6 +1067,25 @@ def test_version_28_grasps_a_book_on_its_side_pitched_less_where_the_turn_then_s
     assert out.success, out
 
 
+def _book_pose_attempt(task: str, init: int, kind: str, seed: int):
+    """One recovery attempt (horizon 520) on a `benchmarks/book_poses.py` scene of a libero_90
+    book task: (outcome, the primitive's label at each step)."""
+    from benchmarks.book_poses import make_scene
+    from pipeline.release.experts import attempt, recovery_expert
+    from pipeline.sim import get_task
+
+    env = build_env(get_task("libero_90", task))
+    try:
+        env.reset_to_init(init)
+        state, _ = make_scene(env, kind, np.random.default_rng(seed))
+        policy = recovery_expert(env, 0, 0.0)
+        labels: list[str] = []
+        out = attempt(env, state, policy, 0, 520, 8, on_step=lambda info: labels.append(getattr(policy._prim, "label", "")))
+        return out, labels
+    finally:
+        env.close()
+
+
 @pytest.mark.sim
 def test_version_29_lets_the_hand_rise_toward_the_base_after_standing_a_book_up_from_its_face():
     """A tuning-state scene (`benchmarks/book_poses.py`, kind `upside`: libero_90 STUDY_SCENE2,
@@ -1075,28 +1094,11 @@ def test_version_29_lets_the_hand_rise_toward_the_base_after_standing_a_book_up_
     straight up while the hand levelled, the elbow stretched into its limit, the hand stayed
     tilted, and the arm was sent home (`back_out`'s pull-in) before the book was grasped: a
     timeout. Rising toward the base, the elbow stays bent and the hand levels on the way."""
-    from benchmarks.book_poses import make_scene
-    from pipeline.release.experts import attempt, recovery_expert
-    from pipeline.sim import get_task
-
-    env = build_env(get_task("libero_90", "STUDY_SCENE2_pick_up_the_book_and_place_it_in_the_back_compartment_of_the_caddy"))
-    try:
-        env.reset_to_init(0)
-        state, _ = make_scene(env, "upside", np.random.default_rng(11020))
-        policy = recovery_expert(env, 0, 0.0)
-        seen = []
-
-        def watch(info):
-            label = getattr(policy._prim, "label", "")
-            if not seen or seen[-1] != label:
-                seen.append(label)
-
-        out = attempt(env, state, policy, 0, 520, 8, on_step=watch)
-        assert "tip" in seen and "put_down" in seen, seen
-        assert "pull_in" not in seen[seen.index("put_down"):], seen
-        assert out.success, out
-    finally:
-        env.close()
+    out, labels = _book_pose_attempt("STUDY_SCENE2_pick_up_the_book_and_place_it_in_the_back_compartment_of_the_caddy",
+                                     0, "upside", 11020)
+    assert "tip" in labels and "put_down" in labels, sorted(set(labels))
+    assert "pull_in" not in labels[labels.index("put_down"):]
+    assert out.success, out
 
 
 @pytest.mark.sim
@@ -1107,23 +1109,9 @@ def test_version_30_tilts_the_hand_the_way_round_the_wrist_reaches_from_the_outs
     limit and stalled the whole TILT_STEPS before turning by half a turn about its axis (104
     steps tilting; a timeout). The arm's reach (`SimEnv.ik_residual`) picks the turned yaw
     up front: one tilt, and the book is in the compartment before the horizon."""
-    from benchmarks.book_poses import make_scene
     from pipeline.policies.scripted.recovery.stand_book import TILT_STEPS
-    from pipeline.release.experts import attempt, recovery_expert
-    from pipeline.sim import get_task
 
-    env = build_env(get_task("libero_90", "STUDY_SCENE1_pick_up_the_book_and_place_it_in_the_left_compartment_of_the_caddy"))
-    try:
-        env.reset_to_init(2)
-        state, _ = make_scene(env, "side", np.random.default_rng(17112))
-        policy = recovery_expert(env, 0, 0.0)
-        tilting = []
-
-        def watch(info):
-            tilting.append(getattr(policy._prim, "label", "") == "tilt")
-
-        out = attempt(env, state, policy, 0, 520, 8, on_step=watch)
-        assert 0 < sum(tilting) <= TILT_STEPS, sum(tilting)
-        assert out.success, out
-    finally:
-        env.close()
+    out, labels = _book_pose_attempt("STUDY_SCENE1_pick_up_the_book_and_place_it_in_the_left_compartment_of_the_caddy",
+                                     2, "side", 17112)
+    assert 0 < labels.count("tilt") <= TILT_STEPS, labels.count("tilt")
+    assert out.success, out
