@@ -9,7 +9,8 @@ robosuite (and no network): the render check needs only mujoco, numpy and the pr
 renderer module, loaded from its file so that `pipeline.sim`'s package import (LIBERO) is not
 needed; the scene comes as the MJCF robosuite compiles plus its asset files. It renders
 the folder's states at 256 px, both cameras, at standard and fast quality and with the
-renderer before version 2, and prints wall and CPU ms per frame (EGL, `MUJOCO_GL=egl`).
+renderer before version 2, and prints wall and CPU ms per frame (EGL, `MUJOCO_GL=egl`) and
+how far each frame is from LIBERO's own (`libero.npz`, rendered by `export` where LIBERO runs).
 
 The VLM check builds a tiny random Qwen-VL checkpoint offline (tests/labelers/vlm/tiny_qwen.py),
 writes a 26 s 4-fps 128 px video, and runs `TransformersBackend` on `cuda` in bf16 through its
@@ -46,6 +47,9 @@ def render(folder: Path, reps: int) -> dict:
     for name, value in np.load(folder / "fields.npz").items():
         getattr(model, name)[:] = value
     states = np.load(folder / "states.npy")
+    # LIBERO's own frames of these states, rendered by `export` on the machine that has LIBERO
+    lib = np.load(folder / "libero.npz") if (folder / "libero.npz").exists() else None
+    base = np.stack([lib[c] for c in CAMERAS], axis=1).astype(np.int16) if lib is not None else None
     out = {"gl_vendor": None, "frames": len(states) * len(CAMERAS)}
     for name, quality, collision in (("standard", "standard", False), ("fast", "fast", False),
                                      ("v1 standard (collision drawn)", "standard", True)):
@@ -72,6 +76,9 @@ def render(folder: Path, reps: int) -> dict:
         n = reps * len(states) * len(CAMERAS)
         out[name] = {"wall_ms": (time.perf_counter() - w0) / n * 1e3, "cpu_ms": (time.process_time() - c0) / n * 1e3,
                      "mean_pixel": float(np.mean(frames))}
+        if base is not None:
+            diff = np.abs(np.asarray(frames, np.int16).reshape(base.shape) - base)
+            out[name] |= {"vs_libero_mean": float(diff.mean()), "vs_libero_share_over_16": float((diff.max(-1) > 16).mean())}
         r.close()
     # the physics of those states alone (mj_forward per frame), to show what the frame costs beside it
     w0 = time.perf_counter()
