@@ -1115,3 +1115,26 @@ def test_version_30_tilts_the_hand_the_way_round_the_wrist_reaches_from_the_outs
                                      2, "side", 17112)
     assert 0 < labels.count("tilt") <= TILT_STEPS, labels.count("tilt")
     assert out.success, out
+
+
+@pytest.mark.sim
+def test_version_31_names_no_plan_for_a_lying_mug_the_microwave_takes_upright_only():
+    """tunerecur, libero_10 KITCHEN_SCENE6 (the mug into the microwave), init 2, step 96: the
+    mug lies on its side. The insertion grips an upright mug's handle and returned without a
+    step five times: `retries_exhausted` at step 1, as if five grasps had failed. No skill
+    stands a mug up, and from above it lands on the microwave's roof (tried): the expert
+    says so, `no_plan`."""
+    from pipeline.policies.scripted.recovery.lying_cup import lying
+
+    task = "KITCHEN_SCENE6_put_the_yellow_and_white_mug_in_the_microwave_and_close_it"
+    with tuning_scene("libero_10", task, 2, 1743900017, 96) as s:
+        assert lying(s, "white_yellow_mug_1") and not lying(s, "porcelain_mug_1")
+    policies = []
+
+    def watch(_, policy):
+        policies.append(policy)
+        return None
+
+    out = tuning_attempt("libero_10", task, 1743900017, 96, init=2, watch=watch)
+    assert not out.success and out.steps <= 2, out
+    assert policies[0].give_up_reason == GiveUpReason.NO_PLAN, policies[0].give_up_detail

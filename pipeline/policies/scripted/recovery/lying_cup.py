@@ -80,11 +80,16 @@ def _handle_bar(scene: Scene, obj: str):
     return rot, centres[bar], radial, halves[bar]
 
 
+def lying(scene: Scene, obj: str) -> bool:
+    """`obj`'s own up axis is within 60 degrees of horizontal (LYING_COS): it lies on its side."""
+    return bool(abs(_rot(scene.env.object_pose(obj)[1])[2, 2]) <= LYING_COS)
+
+
 def lying_handle_grasp(scene: Scene, obj: str) -> HandleGrasp | None:
     """The handle grasp of `obj` when it is a handled object lying on its side, else None."""
     pos, quat = scene.env.object_pose(obj)
     axis = _rot(quat)[:, 2]
-    if abs(axis[2]) > LYING_COS:
+    if not lying(scene, obj):
         return None
     found = _handle_bar(scene, obj)
     if found is None:

@@ -28,6 +28,7 @@ from pipeline.policies.scripted.recovery import checks
 from pipeline.policies.scripted.recovery.back_out import back_out, let_go
 from pipeline.policies.scripted.recovery.face_book import lying_on_face, pinch_blockers
 from pipeline.policies.scripted.recovery.low_drawer import hook_low_drawer, low_handle
+from pipeline.policies.scripted.recovery.lying_cup import lying
 from pipeline.policies.scripted.recovery.operate import operate_once
 from pipeline.policies.scripted.recovery.pick_place import pick_place_once
 from pipeline.policies.scripted.recovery.put_aside import put_aside
@@ -318,6 +319,11 @@ def attempt(r: Round, _: bool) -> Plan:
     if isinstance(ctx.noise, RetryNoise):
         ctx.noise.attempt = r.tries[sub]
     if sub[0] == Predicate.IN and insert.can_insert(s, sub):
+        if r.held != sub[1] and lying(s, sub[1]):
+            # the insertion grips an upright mug's handle and does nothing with a lying one
+            # (a mug on its side for the microwave: five empty tries, `retries_exhausted` at
+            # step 1); no skill stands it up, and from above it only lands on the roof
+            raise GiveUp(GiveUpReason.NO_PLAN, f"{sub[1]} lies on its side; {sub[2]} takes it upright only")
         yield from insert.insert(ctx, sub, insert.ACROSS_SPEED)  # through a door opening, under a roof
     elif r.put:
         if (yield from pick_place_once(ctx, sub, r.tries[sub])):
