@@ -38,7 +38,7 @@ if TYPE_CHECKING:
     from pipeline.sim import SimEnv
 
 # bump when the experts change so cached certificates of an older expert are not reused
-EXPERT_VERSION = {"plain": 5, "recovery": 31}
+EXPERT_VERSION = {"plain": 5, "recovery": 32}
 
 
 @dataclass(frozen=True)

@@ -1138,3 +1138,23 @@ def test_version_31_names_no_plan_for_a_lying_mug_the_microwave_takes_upright_on
     out = tuning_attempt("libero_10", task, 1743900017, 96, init=2, watch=watch)
     assert not out.success and out.steps <= 2, out
     assert policies[0].give_up_reason == GiveUpReason.NO_PLAN, policies[0].give_up_detail
+
+
+@pytest.mark.sim
+def test_version_32_presses_a_bowl_leaning_in_the_drawer_flat_instead_of_grasping_it_again():
+    """tunewide, libero_10 KITCHEN_SCENE4 (the bowl into the bottom drawer and close it), init
+    3, step 305: the bowl leans 35 degrees on the open drawer's wall and rises over it, so the
+    drawer jams. Grasped again to be re-placed, the hand came down on the cabinet over the
+    drawer's back half twice (a timeout; `retries_exhausted` with a longer horizon). A fist
+    pressing its highest rim point, in the open, lays it flat, and the drawer closes."""
+    from pipeline.policies.scripted.grasps import leaning
+
+    task = "KITCHEN_SCENE4_put_the_black_bowl_in_the_bottom_drawer_of_the_cabinet_and_close_it"
+    joint = "white_cabinet_1_bottom_level"
+    with tuning_scene("libero_10", task, 3, 173332742, 305) as s:
+        assert leaning(s, "akita_black_bowl_1") and checks.proud_in_drawer(s, joint) == ["akita_black_bowl_1"]
+    labels: list[str] = []
+    out = tuning_attempt("libero_10", task, 173332742, 305, init=3,
+                         watch=lambda _, policy: lambda info: labels.append(getattr(policy._prim, "label", "")))
+    assert "press" in labels and "close" not in labels[:labels.index("press")], sorted(set(labels))
+    assert out.success, out

@@ -161,18 +161,31 @@ def leaning(scene: Scene, obj: str) -> bool:
     return bool(LEAN_MIN < np.arccos(np.clip(up[2], -1.0, 1.0)) < LEAN_MAX)
 
 
+def _rim(scene: Scene, obj: str):
+    """A tilted round object's rim in its own frame: (position, rotation, the rim's height,
+    its centre (xy), its radius, the rim plane's steepest way up (xy))."""
+    pos, rot = scene.env.object_frame(obj)
+    local = (scene.env.object_corners(obj) - pos) @ rot
+    top = float(local[:, 2].max())
+    mid = (local[:, :2].max(axis=0) + local[:, :2].min(axis=0)) / 2
+    radius = float(np.min(local[:, :2].max(axis=0) - local[:, :2].min(axis=0))) / 2
+    rise = rot[2, :2] / np.linalg.norm(rot[2, :2])
+    return pos, rot, top, mid, radius, rise
+
+
+def highest_rim(scene: Scene, obj: str, inset: float) -> np.ndarray:
+    """The highest point of a tilted round object's rim, `inset` in from its outer edge (world)."""
+    pos, rot, top, mid, radius, rise = _rim(scene, obj)
+    return pos + rot @ np.array([*(mid + rise * (radius - inset)), top])
+
+
 def side_rim(scene: Scene, obj: str, side: int) -> Grasp:
     """A leaning object's rim wall where it stands vertical: a quarter turn round the rim
     from its highest point (`side` 0 or 1: which way), the fingers closing across it. At the
     highest point the wall's outside faces up and the outer finger came down on it: the bowl
     was pushed down and slipped out (measured: a bowl leaning 46 degrees in the bottom
     drawer); a level rim grasp aims under the box top, over the lower rim, into the air."""
-    pos, rot = scene.env.object_frame(obj)
-    local = (scene.env.object_corners(obj) - pos) @ rot
-    top = float(local[:, 2].max())
-    mid = (local[:, :2].max(axis=0) + local[:, :2].min(axis=0)) / 2
-    radius = float(np.min(local[:, :2].max(axis=0) - local[:, :2].min(axis=0))) / 2
-    rise = rot[2, :2] / np.linalg.norm(rot[2, :2])  # the rim plane's steepest way up, own frame
+    pos, rot, top, mid, radius, rise = _rim(scene, obj)
     across = np.array([-rise[1], rise[0]]) * (1 if side % 2 == 0 else -1)
     rim = pos + rot @ np.array([*(mid + across * (radius - RIM_INSET)), top])
     rim[2] -= RIM_DEPTH

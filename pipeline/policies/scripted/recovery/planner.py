@@ -63,6 +63,7 @@ def recover(ctx: Ctx, now: Callable[[], int], budget: int | None) -> Plan:
     aside: Counter = Counter()
     shut: Counter = Counter()  # drawers closed because they overhung a goal object
     unwound: Counter = Counter()
+    pressed: Counter = Counter()
     keep = {n for c in goal for n in c[1:]}  # never moved aside: goal objects, targets and
     keep |= {s.env.region(n).parent for n in list(keep) if s.env.is_region(n)}  # their owners
     while not s.env.goal_satisfied():
@@ -71,7 +72,7 @@ def recover(ctx: Ctx, now: Callable[[], int], budget: int | None) -> Plan:
         sub = next_subgoal(ctx, steps, goal)
         if sub is None:
             raise GiveUp(GiveUpReason.NO_PLAN, "every subgoal holds but the goal does not")
-        r = Round(ctx, goal, sub, keep, tries, aside, shut, unwound)
+        r = Round(ctx, goal, sub, keep, tries, aside, shut, unwound, pressed)
         for rule in RULES:
             how = rule.when(r)
             if how is None:

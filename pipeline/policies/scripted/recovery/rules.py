@@ -31,6 +31,7 @@ from pipeline.policies.scripted.recovery.low_drawer import hook_low_drawer, low_
 from pipeline.policies.scripted.recovery.lying_cup import lying
 from pipeline.policies.scripted.recovery.operate import operate_once
 from pipeline.policies.scripted.recovery.pick_place import pick_place_once
+from pipeline.policies.scripted.recovery.press_flat import press_flat
 from pipeline.policies.scripted.recovery.put_aside import put_aside
 from pipeline.policies.scripted.recovery.reasons import GiveUp, GiveUpReason
 from pipeline.policies.scripted.recovery.stand_book import edge_blockers, stand_tilt
@@ -66,6 +67,7 @@ class Round:
     aside: Counter  # times each object was moved aside
     shut: Counter  # drawers closed because they overhung a goal object
     unwound: Counter  # times the pinned wrist was unwound (key: "wrist")
+    pressed: Counter  # times each object leaning in a drawer was pressed flat
     movers: list[str] = field(init=False)  # goal objects still to be moved
     held: str | None = field(init=False)
     stale: bool = field(init=False, default=False)  # a remedy changed what the round read: end it
@@ -284,13 +286,14 @@ def proud_in_drawer(r: Round) -> tuple[str, str] | None:
 
 
 def re_place(r: Round, how: tuple[str, str]) -> Plan:
-    """Pull the drawer fully out, then put the object in again (flat), or aside."""
+    """Pull the drawer fully out, then press a leaning object flat (once), or put it in
+    again (flat), or aside."""
     o, joint = how
     s = r.ctx.scene
-    r.aside[o] += 1
     again = next((g for g in r.goal if g[0] == Predicate.IN and g[1] == o), None)
     fr = s.env.joint_frame(joint)
     if abs(fr.qpos) < OPEN_FULL * float(np.max(np.abs(fr.range))):
+        r.aside[o] += 1
         # the part of it under the cabinet cannot be reached from above: pull it out
         debug("open fully first", joint)
         if low_handle(r.ctx, joint):  # the tilted grip meets the table short of a low bar
@@ -298,6 +301,12 @@ def re_place(r: Round, how: tuple[str, str]) -> Plan:
         else:
             yield from articulated.pull_drawer(r.ctx, joint)
         return
+    if not r.pressed[o] and leaning(s, o):
+        r.pressed[o] += 1
+        debug("press flat", o)
+        yield from press_flat(r.ctx, o, joint)
+        return
+    r.aside[o] += 1
     if again is not None and not leaning(s, o):
         yield from pick_place_once(r.ctx, again, r.aside[o])
     else:
