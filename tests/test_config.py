@@ -139,7 +139,8 @@ def test_config_remembers_its_file_for_later_errors(tmp_path):
     ("report5", [40, 41]), ("report6", [38, 39]), ("report7", [36, 37]), ("report8", [34, 35]),
     ("report9", [32, 33]), ("report10", [30, 31]), ("report11", [28, 29]), ("report12", [26, 27]),
     ("report13", [24, 25]), ("report14", [22, 23]), ("report15", [20, 21]), ("report16", [18, 19]),
-    ("report17", [16, 17]), ("report18", [14, 15]), ("report19", [12, 13]), ("report20", [10, 11])])
+    ("report17", [16, 17]), ("report18", [14, 15]), ("report19", [12, 13]), ("report20", [10, 11]),
+    ("report21", [8, 9])])
 def test_the_report_configs_are_the_default_on_init_states_nobody_tunes_on(name, inits):
     """`extends`: a report run states only what differs (README, "Tuning protocol"); each
     round reports on init states no earlier report used."""
