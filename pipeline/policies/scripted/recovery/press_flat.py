@@ -1,11 +1,13 @@
 """Skill: press a bowl that leans in an open drawer flat with a fist.
 
 A bowl leaning on a drawer's wall rises over it and jams the drawer as it closes. Re-placing
-it means grasping it again, and its back half lies under the cabinet even with the drawer
-fully out: the hand came down on the cabinet (measured: two tuning scenes of libero_10's
-bottom drawer, `retries_exhausted` and a timeout). Its highest rim point lies by the wall it
-leans on, in the open: pressed down there, the bowl turns flat onto the floor (measured:
-35 and 20 degrees of tilt, flat after one press, the drawer then closed).
+it means grasping it again: with its back half under the cabinet, even with the drawer fully
+out, the hand came down on the cabinet twice (tunewide, libero_10's bottom drawer, init 3);
+or it is set aside on the table and put in again, ~200 steps (tunerecur, init 0). Both timed
+out. Its highest rim point lies by the wall it leans on, in the open: pressed down there,
+the bowl turns flat onto the floor (those two scenes: 35 and 20 degrees of tilt, flat after
+one press, the drawer then closed, certified at steps 174 and 509). A bowl standing on its
+rim (79 degrees, tunerecur init 2) does not turn under a press: not `leaning`, not pressed.
 """
 
 from __future__ import annotations
