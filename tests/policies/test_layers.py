@@ -33,7 +33,7 @@ for layer, names in enumerate([
      "scripted.recovery.back_out", "scripted.recovery.unwind", "scripted.recovery.long_grasp",
      "scripted.recovery.nudge", "scripted.recovery.lying_cup", "scripted.recovery.near_grasp",
      "scripted.recovery.stand_book", "scripted.recovery.face_book", "scripted.recovery.tip_book",
-     "scripted.recovery.low_drawer",
+     "scripted.recovery.low_drawer", "scripted.recovery.press_flat",
      "scripted.recovery.operate",
      "scripted.recovery.put_aside",
      "scripted.recovery.under_drawer", "scripted.recovery.pick_place", "scripted.recovery.rules",

@@ -619,12 +619,12 @@ def test_a_bottle_lying_beside_the_base_is_grasped_with_the_hand_pitched_toward_
 
 
 @pytest.mark.sim
-@pytest.mark.xfail(strict=True, reason="the level perched bowl, put in straight from the wall, comes down leaning "
-                                       "on the side wall; the attempt times out (tunewide i3, versions 19-30)")
 def test_a_bowl_perched_on_the_bottom_drawers_wall_ends_in_the_closed_drawer():
-    """The outcome the test below no longer asserts, kept as a known failure: the same scene
-    closed at step ~290 where it was first found (remade leaning there); here it times out.
-    Strict: the day it passes, this mark must go."""
+    """The outcome the test below does not assert: the same scene closed at step ~290 where
+    it was first found (remade leaning there); on later machines the level perched bowl, put
+    in straight from the wall, came down leaning on the side wall and the attempt timed out
+    (a strict known failure, versions 19-31). Since version 32 the leaning bowl is pressed
+    flat (`press_flat`) and the drawer closes."""
     out = tuning_attempt("libero_10", "KITCHEN_SCENE4_put_the_black_bowl_in_the_bottom_drawer_of_the_cabinet_and_close_it",
                          173332742, 159, init=3)
     assert out.success and out.steps <= 330, out
