@@ -11,6 +11,7 @@ landing spots are probed with vertical rays through the live scene.
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -161,22 +162,29 @@ def leaning(scene: Scene, obj: str) -> bool:
     return bool(LEAN_MIN < np.arccos(np.clip(up[2], -1.0, 1.0)) < LEAN_MAX)
 
 
-def _rim(scene: Scene, obj: str):
-    """A tilted round object's rim in its own frame: (position, rotation, the rim's height,
-    its centre (xy), its radius, the rim plane's steepest way up (xy))."""
+@dataclass(frozen=True)
+class Rim:
+    """A tilted round object's rim, read in the object's own frame."""
+
+    pos: np.ndarray  # body origin (world)
+    rot: np.ndarray  # body rotation (3, 3)
+    top: float  # the rim's height, own frame
+    height: float  # the object's own height (its box along its own up axis)
+    mid: np.ndarray  # the rim's centre (xy, own frame)
+    radius: float
+    rise: np.ndarray  # the rim plane's steepest way up (xy, own frame)
+
+    def highest(self, inset: float) -> np.ndarray:
+        """The rim's highest point, `inset` in from its outer edge (world)."""
+        return self.pos + self.rot @ np.array([*(self.mid + self.rise * (self.radius - inset)), self.top])
+
+
+def rim(scene: Scene, obj: str) -> Rim:
     pos, rot = scene.env.object_frame(obj)
     local = (scene.env.object_corners(obj) - pos) @ rot
-    top = float(local[:, 2].max())
-    mid = (local[:, :2].max(axis=0) + local[:, :2].min(axis=0)) / 2
-    radius = float(np.min(local[:, :2].max(axis=0) - local[:, :2].min(axis=0))) / 2
-    rise = rot[2, :2] / np.linalg.norm(rot[2, :2])
-    return pos, rot, top, mid, radius, rise
-
-
-def highest_rim(scene: Scene, obj: str, inset: float) -> np.ndarray:
-    """The highest point of a tilted round object's rim, `inset` in from its outer edge (world)."""
-    pos, rot, top, mid, radius, rise = _rim(scene, obj)
-    return pos + rot @ np.array([*(mid + rise * (radius - inset)), top])
+    lo, hi = local.min(axis=0), local.max(axis=0)
+    return Rim(pos=pos, rot=rot, top=float(hi[2]), height=float(hi[2] - lo[2]), mid=(hi[:2] + lo[:2]) / 2,
+               radius=float(np.min(hi[:2] - lo[:2])) / 2, rise=rot[2, :2] / np.linalg.norm(rot[2, :2]))
 
 
 def side_rim(scene: Scene, obj: str, side: int) -> Grasp:
@@ -185,14 +193,14 @@ def side_rim(scene: Scene, obj: str, side: int) -> Grasp:
     highest point the wall's outside faces up and the outer finger came down on it: the bowl
     was pushed down and slipped out (measured: a bowl leaning 46 degrees in the bottom
     drawer); a level rim grasp aims under the box top, over the lower rim, into the air."""
-    pos, rot, top, mid, radius, rise = _rim(scene, obj)
-    across = np.array([-rise[1], rise[0]]) * (1 if side % 2 == 0 else -1)
-    rim = pos + rot @ np.array([*(mid + across * (radius - RIM_INSET)), top])
-    rim[2] -= RIM_DEPTH
-    out = rot[:2, :2] @ across
+    r = rim(scene, obj)
+    across = np.array([-r.rise[1], r.rise[0]]) * (1 if side % 2 == 0 else -1)
+    point = r.pos + r.rot @ np.array([*(r.mid + across * (r.radius - RIM_INSET)), r.top])
+    point[2] -= RIM_DEPTH
+    out = r.rot[:2, :2] @ across
     theta = float(np.arctan2(out[1], out[0]))
     # the fingers close across the wall (along `out`), as rim_grasp's do
-    return Grasp(pos=rim, yaw=float(theta % np.pi - np.pi / 2), rim=True)
+    return Grasp(pos=point, yaw=float(theta % np.pi - np.pi / 2), rim=True)
 
 
 def rim_grasp(scene: Scene, obj: str, dest: np.ndarray | None, choice: int) -> Grasp:

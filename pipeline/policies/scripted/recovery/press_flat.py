@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.policies.scripted.grasps import highest_rim
+from pipeline.policies.scripted.grasps import rim
 from pipeline.policies.scripted.motion import Ctx, Plan, travel
 from pipeline.policies.scripted.primitives import Grip
 
@@ -26,12 +26,10 @@ PRESS_BELOW_M = 0.005  # ... and presses to just under where the rim lies once f
 def press_flat(ctx: Ctx, obj: str, joint: str) -> Plan:
     """Close the hand, come over `obj`'s highest rim point and press it down to just under
     the height its rim has lying flat on the floor of slide `joint`'s drawer, then rise."""
-    s, env = ctx.scene, ctx.scene.env
-    p = highest_rim(s, obj, RIM_INSET_M)
-    pos, rot = env.object_frame(obj)
-    local = (env.object_corners(obj) - pos) @ rot
-    floor = float(env.joint_part_boxes(joint)[:, 1, 2].min())  # the floor plate's top: the lowest part top
-    down = floor + float(np.ptp(local[:, 2])) - PRESS_BELOW_M
+    r = rim(ctx.scene, obj)
+    p = r.highest(RIM_INSET_M)
+    floor = float(ctx.scene.env.joint_part_boxes(joint)[:, 1, 2].min())  # the floor plate's top: the lowest part top
+    down = floor + r.height - PRESS_BELOW_M
     over = np.array([p[0], p[1], p[2] + OVER_M])
     yield Grip(1.0, ctx.close_steps, label="make_fist")
     yield from travel(ctx, over, ctx.yaw_hold, 1.0, over[2])
